@@ -1,0 +1,181 @@
+"""Resampling every altitude source onto one uniform clock (Paper A, section 3.1).
+
+Paper A brings 5 Hz GPS and faster sensors onto a common 10 Hz clock with cubic splines,
+interpolating short series and decimating long ones. What the paper leaves unsaid and this
+module decides (ALGORITHMS.md section 1):
+
+- The clock is ``k / rate_hz`` for whole ``k``: ticks fall on round times of the log's own clock,
+  so rows join with other tools' output.
+- Duplicate timestamps are merged (mean value), unsorted samples sorted.
+- A sensor faster than the clock is first averaged into the cell of width ``1 / rate_hz`` around
+  each tick (a box filter), and the spline is fitted through the cell means: a spline through
+  every raw sample would alias the noise into the decimated series.
+- The spline never bridges a gap longer than ``max_gap_s`` and never extrapolates: ticks in a gap
+  or outside a sensor's data are NaN for that sensor, not invented.
+- The clock spans the union of the sensors' time ranges (NaN marks absence) or their overlap.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from altfuse.errors import NoUsableSensorsError, ParameterError
+from altfuse.model import FloatArray, Series
+
+SPANS = ("union", "overlap")
+
+
+@dataclass(frozen=True)
+class AlignStats:
+    """How one source was resampled."""
+
+    samples: int
+    duplicates_merged: int
+    cells_averaged: int
+    segments: int
+    gaps_over_max: int
+    ticks_valid: int
+
+
+@dataclass(frozen=True)
+class Aligned:
+    """Sources on one clock: ``z[:, i]`` is source ``names[i]`` at times ``t`` (NaN = absent)."""
+
+    t: FloatArray
+    names: tuple[str, ...]
+    kinds: tuple[str, ...]
+    z: FloatArray
+    rate_hz: float
+    max_gap_s: float
+    span: str
+    stats: dict[str, AlignStats]
+
+
+def check_align_parameters(rate_hz: float, max_gap_s: float, span: str) -> None:
+    """Raise :class:`ParameterError` for values that mean nothing."""
+    if not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise ParameterError(f"--rate must be a positive number of Hz, got {rate_hz}")
+    if rate_hz > 1000:
+        raise ParameterError(f"--rate {rate_hz} Hz is above any altitude sensor's rate (<= 1000)")
+    if not (math.isfinite(max_gap_s) and max_gap_s > 0):
+        raise ParameterError(f"--max-gap must be a positive number of seconds, got {max_gap_s}")
+    if span not in SPANS:
+        raise ParameterError(f"--span must be one of {', '.join(SPANS)}, got {span!r}")
+
+
+def merge_duplicates(t: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Sort by time and replace samples sharing a timestamp by their mean."""
+    order = np.argsort(t, kind="stable")
+    t, v = t[order], v[order]
+    unique_t, inverse, counts = np.unique(t, return_inverse=True, return_counts=True)
+    if unique_t.size == t.size:
+        return t, v
+    return unique_t, np.bincount(inverse, weights=v) / counts
+
+
+def cell_means(t: FloatArray, v: FloatArray, rate_hz: float) -> tuple[FloatArray, FloatArray]:
+    """Average the samples falling in the cell ``[k - 1/2, k + 1/2) / rate_hz`` of each tick ``k``.
+
+    Returns the mean time and mean value of every non-empty cell; a sensor slower than the clock
+    comes back unchanged.
+    """
+    cell = np.floor(t * rate_hz + 0.5).astype(np.int64)
+    boundaries = np.flatnonzero(np.diff(cell)) + 1
+    if boundaries.size == t.size - 1:
+        return t, v
+    starts = np.concatenate(([0], boundaries))
+    counts = np.diff(np.concatenate((starts, [t.size])))
+    return np.add.reduceat(t, starts) / counts, np.add.reduceat(v, starts) / counts
+
+
+def resample(
+    t: FloatArray, v: FloatArray, grid: FloatArray, rate_hz: float, max_gap_s: float
+) -> tuple[FloatArray, AlignStats]:
+    """Resample one series onto ``grid`` with cubic splines; NaN in gaps and outside the data."""
+    n_in = t.size
+    t, v = merge_duplicates(t, v)
+    duplicates = n_in - t.size
+    n_unique = t.size
+    t, v = cell_means(t, v, rate_hz)
+    out = np.full(grid.shape, np.nan)
+    breaks = np.flatnonzero(np.diff(t) > max_gap_s) + 1
+    segments = np.split(np.arange(t.size), breaks)
+    half_cell = 0.5 / rate_hz
+    for idx in segments:
+        ts, vs = t[idx], v[idx]
+        if ts.size == 1:
+            lo, hi = np.searchsorted(grid, [ts[0] - half_cell, ts[0] + half_cell])
+            out[lo:hi] = vs[0]
+            continue
+        lo = np.searchsorted(grid, ts[0], side="left")
+        hi = np.searchsorted(grid, ts[-1], side="right")
+        if hi > lo:
+            out[lo:hi] = CubicSpline(ts, vs)(grid[lo:hi])
+    stats = AlignStats(
+        samples=n_in,
+        duplicates_merged=duplicates,
+        cells_averaged=n_unique - t.size,
+        segments=len(segments),
+        gaps_over_max=int(breaks.size),
+        ticks_valid=int(np.isfinite(out).sum()),
+    )
+    return out, stats
+
+
+def make_grid(series: Sequence[Series], rate_hz: float, span: str) -> FloatArray:
+    """Ticks ``k / rate_hz`` covering the union or the overlap of the series' time ranges."""
+    starts = [float(s.t.min()) for s in series]
+    ends = [float(s.t.max()) for s in series]
+    start, end = (min(starts), max(ends)) if span == "union" else (max(starts), min(ends))
+    first, last = math.ceil(start * rate_hz - 1e-9), math.floor(end * rate_hz + 1e-9)
+    if last < first:
+        raise NoUsableSensorsError(
+            "the altitude sources do not overlap in time; try --span union"
+            if span == "overlap"
+            else "the altitude sources hold no time span to resample"
+        )
+    return np.arange(first, last + 1, dtype=np.float64) / rate_hz
+
+
+def align(
+    series: Sequence[Series],
+    rate_hz: float = 10.0,
+    max_gap_s: float = 1.0,
+    span: str = "union",
+) -> Aligned:
+    """Resample ``series`` onto one clock of ``rate_hz`` (Paper A section 3.1, see module doc).
+
+    Parameters
+    ----------
+    series
+        The altitude sources, each with its own sample times [s].
+    rate_hz
+        Rate of the common clock [Hz]; Paper A uses 10 Hz.
+    max_gap_s
+        Longest gap between two samples [s] that the spline may bridge.
+    span
+        ``union``: the clock covers every source's time range; ``overlap``: only the common range.
+    """
+    check_align_parameters(rate_hz, max_gap_s, span)
+    if not series:
+        raise NoUsableSensorsError("no altitude source to align")
+    grid = make_grid(series, rate_hz, span)
+    columns, stats = [], {}
+    for s in series:
+        column, stats[s.name] = resample(s.t, s.value, grid, rate_hz, max_gap_s)
+        columns.append(column)
+    return Aligned(
+        t=grid,
+        names=tuple(s.name for s in series),
+        kinds=tuple(s.kind for s in series),
+        z=np.column_stack(columns),
+        rate_hz=rate_hz,
+        max_gap_s=max_gap_s,
+        span=span,
+        stats=stats,
+    )

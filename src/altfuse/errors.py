@@ -1,0 +1,25 @@
+"""Errors a user can cause. The CLI prints each as one line and exits non-zero."""
+
+
+class AltfuseError(Exception):
+    """Base of every error caused by the input or the options, never by a bug."""
+
+    exit_code = 1
+
+
+class LogReadError(AltfuseError):
+    """The file cannot be read as a flight log (missing, empty, not a log, cut before any data)."""
+
+
+class NoUsableSensorsError(AltfuseError):
+    """The log holds too few altitude sources for the job."""
+
+
+class UnsupportedLogError(AltfuseError):
+    """The log is readable but its content is outside what altfuse fuses (e.g. ArduSub depth)."""
+
+
+class ParameterError(AltfuseError):
+    """An option value is outside its meaningful range."""
+
+    exit_code = 2

@@ -1,0 +1,53 @@
+"""Readers: one module per input format behind :func:`read_log`, which picks by magic bytes."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from altfuse.errors import LogReadError
+from altfuse.model import FlightLog
+
+#: Every DataFlash record starts with these two bytes; the first records are FMT (type 0x80).
+DATAFLASH_FMT_HEADER = b"\xa3\x95\x80"
+ULOG_MAGIC = b"ULog\x01\x12\x35"
+_SNIFF_BYTES = 4096
+
+
+def sha256_of(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for chunk in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def read_log(path: str | Path) -> FlightLog:
+    """Read a flight log, choosing the reader by the file's first bytes, not its name.
+
+    Raises
+    ------
+    LogReadError
+        The file is missing, empty, unreadable, or not a format altfuse reads.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise LogReadError(f"{path}: no such file")
+    if not path.is_file():
+        raise LogReadError(f"{path}: not a file")
+    try:
+        with path.open("rb") as handle:
+            head = handle.read(_SNIFF_BYTES)
+    except OSError as exc:
+        raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
+    if not head:
+        raise LogReadError(f"{path}: the file is empty")
+    if head.startswith(ULOG_MAGIC):
+        raise LogReadError(
+            f"{path}: a PX4 ULog file; altfuse reads ArduPilot DataFlash (.bin) logs"
+        )
+    if DATAFLASH_FMT_HEADER not in head:
+        raise LogReadError(f"{path}: not a DataFlash log (no FMT record in its first bytes)")
+    from altfuse.io.dataflash import read_dataflash
+
+    return read_dataflash(path)

@@ -1,0 +1,106 @@
+"""A small DataFlash writer: FMT, UNIT, MULT and FMTU records, then data records.
+
+The record layout is ArduPilot's (``AP_Logger/LogStructure.h``): every record starts with the
+bytes 0xA3 0x95 and its type id; FMT (type 128) declares each type's length, name, format string
+and column names; UNIT and MULT define unit and multiplier ids; FMTU gives each type's units and
+multipliers. pymavlink's format-character table is the authority on the binary layout, so what this
+writes is what pymavlink reads.
+"""
+
+from __future__ import annotations
+
+import struct
+from typing import BinaryIO
+
+from pymavlink.DFReader import FORMAT_TO_STRUCT
+
+HEADER = b"\xa3\x95"
+FMT_TYPE = 0x80
+FMT_FORMAT = "BBnNZ"
+FMT_COLUMNS = "Type,Length,Name,Format,Columns"
+
+#: Unit and multiplier ids as ArduPilot defines them (a subset).
+UNITS = {
+    "-": "",
+    "s": "s",
+    "m": "m",
+    "n": "m/s",
+    "o": "m/s/s",
+    "d": "deg",
+    "h": "degheading",
+    "D": "deglatitude",
+    "U": "deglongitude",
+    "P": "Pa",
+    "O": "degC",
+    "#": "instance",
+    "E": "rad/s",
+    "S": "satellites",
+}
+MULTIPLIERS = {"-": 0.0, "?": 1.0, "0": 1.0, "B": 1e-2, "C": 1e-3, "F": 1e-6, "G": 1e-7}
+
+
+def _struct(fmt: str) -> struct.Struct:
+    return struct.Struct("<" + "".join(FORMAT_TO_STRUCT[c][0] for c in fmt))
+
+
+def _encode(fmt: str, values: tuple[object, ...]) -> list[object]:
+    out: list[object] = []
+    for c, v in zip(fmt, values, strict=True):
+        _, scale, kind = FORMAT_TO_STRUCT[c]
+        if kind is str:
+            out.append(str(v).encode("ascii"))
+        elif scale is not None:
+            out.append(round(float(v) / scale))  # type: ignore[arg-type]
+        elif kind is float:
+            out.append(float(v))  # type: ignore[arg-type]
+        else:
+            out.append(int(v))  # type: ignore[call-overload]
+    return out
+
+
+class DataFlashWriter:
+    """Write a DataFlash log to a binary stream.
+
+    >>> import io
+    >>> w = DataFlashWriter(io.BytesIO())
+    >>> w.define("BARO", "QBf", "TimeUS,I,Alt", units="s#m", mults="F-0")
+    >>> w.write("BARO", 1_000_000, 0, 12.5)
+    """
+
+    def __init__(self, stream: BinaryIO) -> None:
+        self.stream = stream
+        self.records = 0
+        self._types: dict[str, tuple[int, str, struct.Struct]] = {}
+        self._next_type = 129
+        self._declare("FMT", FMT_TYPE, FMT_FORMAT, FMT_COLUMNS)
+        self.define("UNIT", "QbZ", "TimeUS,Id,Label")
+        self.define("MULT", "Qbd", "TimeUS,Id,Mult")
+        self.define("FMTU", "QBNN", "TimeUS,FmtType,UnitIds,MultIds")
+        for uid, label in UNITS.items():
+            self.write("UNIT", 0, ord(uid), label)
+        for mid, mult in MULTIPLIERS.items():
+            self.write("MULT", 0, ord(mid), mult)
+
+    def _declare(self, name: str, type_id: int, fmt: str, columns: str) -> None:
+        packer = _struct(fmt)
+        self._types[name] = (type_id, fmt, packer)
+        length = len(HEADER) + 1 + packer.size
+        self.write("FMT", type_id, length, name, fmt, columns)
+
+    def define(
+        self, name: str, fmt: str, columns: str, units: str | None = None, mults: str | None = None
+    ) -> None:
+        """Declare a record type (FMT), with its units and multipliers (FMTU) when given."""
+        if len(columns.split(",")) != len(fmt):
+            raise ValueError(f"{name}: {len(fmt)} format characters for columns {columns}")
+        type_id = self._next_type
+        self._next_type += 1
+        self._declare(name, type_id, fmt, columns)
+        if units is not None and mults is not None:
+            self.write("FMTU", 0, type_id, units, mults)
+
+    def write(self, name: str, *values: object) -> None:
+        """Write one record of type ``name``; scaled fields take their value in the real unit."""
+        type_id, fmt, packer = self._types[name]
+        self.stream.write(HEADER + bytes([type_id]) + packer.pack(*_encode(fmt, values)))
+        self.records += 1

@@ -1,0 +1,93 @@
+"""Value objects passed between the stages. Times are float seconds on the log's clock
+(``TimeUS / 1e6``), lengths are metres, angles radians, accelerations m/s²."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+#: The kinds of altitude source, in the order altfuse prefers them as a datum reference.
+SENSOR_KINDS = ("baro", "gps", "rangefinder")
+
+
+@dataclass(frozen=True)
+class Series:
+    """One altitude source or reference as read from the log: samples at the log's own times.
+
+    Attributes
+    ----------
+    name
+        Column name in the output, e.g. ``gps``, ``gps2``, ``baro``, ``rangefinder``.
+    kind
+        ``gps``, ``baro`` or ``rangefinder`` for sensors; ``reference`` for references.
+    source
+        Where it came from in the log, e.g. ``GPS.Alt[I=0]`` or ``CTUN.SAlt``.
+    datum
+        What zero means for the raw values: ``amsl`` (GPS), ``baro calibration``,
+        ``ground below the vehicle`` (rangefinder), ``EKF origin``, ...
+    t
+        Sample times [s], sorted, on the log's clock.
+    value
+        Samples [m], height positive up.
+    dropped
+        Samples the reader left out, by reason (e.g. ``{"GPS Status < 3": 12}``).
+    """
+
+    name: str
+    kind: str
+    source: str
+    datum: str
+    t: FloatArray
+    value: FloatArray
+    dropped: dict[str, int] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.t.shape != self.value.shape:
+            raise ValueError(f"{self.name}: {self.t.shape} times for {self.value.shape} values")
+
+
+@dataclass(frozen=True)
+class Imu:
+    """Specific force in the body frame (FRD) [m/s²] of the first IMU."""
+
+    source: str
+    t: FloatArray
+    acc: FloatArray  # shape (n, 3)
+
+
+@dataclass(frozen=True)
+class Attitude:
+    """Vehicle attitude [rad], ZYX Euler angles as ArduPilot logs them in ATT."""
+
+    source: str
+    t: FloatArray
+    roll: FloatArray
+    pitch: FloatArray
+    yaw: FloatArray
+
+
+@dataclass(frozen=True)
+class FlightLog:
+    """Everything altfuse uses from one log, decoded and in SI units.
+
+    ``sensors`` are the altitude inputs; ``references`` (EKF, AHRS, simulator truth) are
+    never fused, only reported and compared against.
+    """
+
+    path: str
+    sha256: str
+    size_bytes: int
+    vehicle: str
+    firmware: str
+    sensors: tuple[Series, ...]
+    references: tuple[Series, ...]
+    imu: Imu | None
+    attitude: Attitude | None
+    record_counts: dict[str, int]
+    skipped_bytes: int
+    notes: tuple[str, ...] = ()
+    dropped_sources: dict[str, str] = field(default_factory=dict)

@@ -1,0 +1,174 @@
+"""read -> align -> datum -> fuse, with the provenance of every step."""
+
+from __future__ import annotations
+
+import datetime as dt
+import inspect
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from altfuse import __version__
+from altfuse.align import Aligned, align, check_align_parameters
+from altfuse.datum import Referred, check_datum_parameters, refer_to_takeoff
+from altfuse.errors import NoUsableSensorsError, ParameterError, UnsupportedLogError
+from altfuse.fuse import FUSERS, FusionResult
+from altfuse.io import read_log
+from altfuse.model import FlightLog
+
+
+@dataclass(frozen=True)
+class FuseOptions:
+    """Everything that decides a fusion run besides the log itself."""
+
+    method: str = "support"
+    rate_hz: float = 10.0
+    max_gap_s: float = 1.0
+    span: str = "union"
+    ground_s: float = 5.0
+    climb_m: float = 1.0
+    min_sensors: int = 2
+    params: dict[str, Any] = field(default_factory=dict)
+
+    def check(self) -> None:
+        """Raise :class:`ParameterError` before any work if an option means nothing."""
+        if self.method not in FUSERS:
+            raise ParameterError(
+                f"unknown method {self.method!r}; choose one of {', '.join(FUSERS)}"
+            )
+        accepted = inspect.signature(FUSERS[self.method]).parameters
+        for name in self.params:
+            if name not in accepted or name == "z":
+                raise ParameterError(f"--{name} does not apply to method {self.method!r}")
+        check_align_parameters(self.rate_hz, self.max_gap_s, self.span)
+        check_datum_parameters(self.ground_s, self.climb_m)
+        if self.min_sensors < 1:
+            raise ParameterError(f"--min-sensors must be at least 1, got {self.min_sensors}")
+
+
+@dataclass(frozen=True)
+class FuseRun:
+    """The value of every stage of one run, and the provenance record built from them."""
+
+    log: FlightLog
+    aligned: Aligned
+    referred: Referred
+    result: FusionResult
+    options: FuseOptions
+    provenance: dict[str, Any]
+
+
+def _require_sensors(names: tuple[str, ...], options: FuseOptions, dropped: dict[str, str]) -> None:
+    if len(names) >= options.min_sensors:
+        return
+    found = ", ".join(names) or "none"
+    why = "; ".join(f"{k}: {v}" for k, v in dropped.items())
+    raise NoUsableSensorsError(
+        f"{len(names)} usable altitude source(s) ({found}), {options.min_sensors} needed"
+        + (f" [{why}]" if why else "")
+        + (" (--min-sensors 1 writes a single source)" if names and options.min_sensors > 1 else "")
+    )
+
+
+def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
+    """Fuse the altitude sources of an already-read log."""
+    options.check()
+    if flight.vehicle == "sub":
+        raise UnsupportedLogError(
+            f"{Path(flight.path).name}: an ArduSub log; its BARO is water depth, "
+            "and altfuse fuses the altitude of aircraft"
+        )
+    dropped = dict(flight.dropped_sources)
+    _require_sensors(tuple(s.name for s in flight.sensors), options, dropped)
+    aligned = align(flight.sensors, options.rate_hz, options.max_gap_s, options.span)
+    referred = refer_to_takeoff(aligned, options.ground_s, options.climb_m)
+    dropped.update(referred.dropped)
+    _require_sensors(referred.names, options, dropped)
+    result = FUSERS[options.method](referred.h, **options.params)
+    return FuseRun(
+        log=flight,
+        aligned=aligned,
+        referred=referred,
+        result=result,
+        options=options,
+        provenance=provenance(flight, aligned, referred, result, dropped),
+    )
+
+
+def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
+    """Read the log at ``path`` and fuse its altitude sources (the ``altfuse fuse`` job)."""
+    options = options or FuseOptions()
+    options.check()
+    return fuse_flight(read_log(path), options)
+
+
+def provenance(
+    flight: FlightLog,
+    aligned: Aligned,
+    referred: Referred,
+    result: FusionResult,
+    dropped: dict[str, str],
+) -> dict[str, Any]:
+    """How the output was made: enough to reproduce it and to judge it."""
+    statuses, counts = np.unique(result.status, return_counts=True)
+    return {
+        "altfuse_version": __version__,
+        "created_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "input": {
+            "file": Path(flight.path).name,
+            "sha256": flight.sha256,
+            "size_bytes": flight.size_bytes,
+            "vehicle": flight.vehicle,
+            "firmware": flight.firmware,
+            "skipped_bytes": flight.skipped_bytes,
+            "notes": list(flight.notes),
+        },
+        "method": result.method,
+        "parameters": result.params,
+        "clock": {
+            "rate_hz": aligned.rate_hz,
+            "max_gap_s": aligned.max_gap_s,
+            "span": aligned.span,
+            "start_s": float(aligned.t[0]),
+            "end_s": float(aligned.t[-1]),
+            "ticks": int(aligned.t.size),
+            "time": "seconds since the autopilot booted (TimeUS / 1e6)",
+        },
+        "datum": {
+            "meaning": "height above the take-off point [m]",
+            "reference": referred.reference,
+            "takeoff_s": referred.takeoff_s,
+            "ground_window_s": list(referred.ground_window_s),
+            "offsets": [
+                {
+                    "sensor": o.name,
+                    "offset_m": o.offset_m,
+                    "method": o.method,
+                    "window_s": list(o.window_s),
+                    "ticks": o.ticks,
+                }
+                for o in referred.offsets
+            ],
+        },
+        "sensors_used": [
+            {
+                "name": s.name,
+                "kind": s.kind,
+                "source": s.source,
+                "raw_datum": s.datum,
+                "samples": int(s.t.size),
+                "samples_dropped": s.dropped,
+                "alignment": vars(aligned.stats[s.name]),
+            }
+            for s in flight.sensors
+            if s.name in referred.names
+        ],
+        "sensors_dropped": dropped,
+        "references": [
+            {"name": r.name, "source": r.source, "datum": r.datum, "samples": int(r.t.size)}
+            for r in flight.references
+        ],
+        "status_counts": {str(s): int(c) for s, c in zip(statuses, counts, strict=True)},
+    }

@@ -1,0 +1,113 @@
+"""Writing a run's outputs: the fused CSV, the weight traces, the JSON provenance sidecar.
+
+Every file is written to a temporary file beside its target and renamed into place only when all
+of them are complete, so a failure never leaves a half-written output behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+import pandas as pd
+
+from altfuse.pipeline import FuseRun
+
+FLOAT_FORMAT = "%.6f"
+
+
+def fused_table(run: FuseRun) -> pd.DataFrame:
+    """One row per tick: time, each sensor's referred height, the fused height, weights, support.
+
+    Columns: ``time_s``; ``alt_<sensor>_m`` for each sensor (height above take-off);
+    ``fused_alt_m``; ``status`` (``fused``/``equal``/``single``/``none``); ``n_sensors``;
+    ``weight_<sensor>`` (summing to 1); ``support_<sensor>`` (Paper A's r_i, where the method
+    computes it).
+    """
+    ref, res = run.referred, run.result
+    columns: dict[str, Any] = {"time_s": ref.t}
+    for i, name in enumerate(ref.names):
+        columns[f"alt_{name}_m"] = ref.h[:, i]
+    columns["fused_alt_m"] = res.fused
+    columns["status"] = res.status
+    columns["n_sensors"] = np.isfinite(ref.h).sum(axis=1)
+    for i, name in enumerate(ref.names):
+        columns[f"weight_{name}"] = res.weights[:, i]
+    if "support" in res.traces:
+        for i, name in enumerate(ref.names):
+            columns[f"support_{name}"] = res.traces["support"][:, i]
+    table: pd.DataFrame = pd.DataFrame(columns)
+    return table
+
+
+def weights_table(run: FuseRun) -> pd.DataFrame:
+    """The weight traces: normalised weights and every method-specific trace, per sensor."""
+    ref, res = run.referred, run.result
+    columns: dict[str, Any] = {"time_s": ref.t}
+    for i, name in enumerate(ref.names):
+        columns[f"weight_{name}"] = res.weights[:, i]
+    for key, trace in res.traces.items():
+        for i, name in enumerate(ref.names):
+            columns[f"{key}_{name}"] = trace[:, i]
+    table: pd.DataFrame = pd.DataFrame(columns)
+    return table
+
+
+def default_meta_path(csv_path: Path) -> Path:
+    """``out.csv`` -> ``out.meta.json``."""
+    return csv_path.with_suffix(".meta.json")
+
+
+@contextlib.contextmanager
+def atomic_outputs() -> Iterator[Callable[[Path, Callable[[TextIO], None]], None]]:
+    """Collect writes into temporary files; rename them all into place on success only."""
+    staged: list[tuple[str, Path]] = []
+
+    def stage(target: Path, write: Callable[[TextIO], None]) -> None:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+        staged.append((tmp, target))
+        with os.fdopen(fd, "w", newline="", encoding="utf-8") as handle:
+            write(handle)
+
+    try:
+        yield stage
+    except BaseException:
+        for tmp, _ in staged:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+        raise
+    for tmp, target in staged:
+        os.replace(tmp, target)
+
+
+def write_outputs(
+    run: FuseRun,
+    csv_path: str | Path,
+    weights_path: str | Path | None = None,
+    meta_path: str | Path | None = None,
+) -> dict[str, str]:
+    """Write the CSV, the optional weight traces and the provenance sidecar; return their paths."""
+    csv_path = Path(csv_path)
+    meta = Path(meta_path) if meta_path else default_meta_path(csv_path)
+    outputs = {"csv": str(csv_path), "meta": str(meta)}
+    if weights_path:
+        outputs["weights"] = str(weights_path)
+    provenance = dict(run.provenance, outputs=outputs)
+    with atomic_outputs() as stage:
+        stage(
+            csv_path, lambda f: fused_table(run).to_csv(f, index=False, float_format=FLOAT_FORMAT)
+        )
+        if weights_path:
+            stage(
+                Path(weights_path),
+                lambda f: weights_table(run).to_csv(f, index=False, float_format=FLOAT_FORMAT),
+            )
+        stage(meta, lambda f: json.dump(provenance, f, indent=2, allow_nan=False, default=str))
+    return outputs
