@@ -106,14 +106,15 @@ def resample(
     breaks = np.flatnonzero(np.diff(t) > max_gap_s) + 1
     segments = np.split(np.arange(t.size), breaks)
     half_cell = 0.5 / rate_hz
+    eps = 1e-6  # the log's time resolution: a tick this close to a segment's end is inside it
     for idx in segments:
         ts, vs = t[idx], v[idx]
         if ts.size == 1:
             lo, hi = np.searchsorted(grid, [ts[0] - half_cell, ts[0] + half_cell])
             out[lo:hi] = vs[0]
             continue
-        lo = np.searchsorted(grid, ts[0], side="left")
-        hi = np.searchsorted(grid, ts[-1], side="right")
+        lo = np.searchsorted(grid, ts[0] - eps, side="left")
+        hi = np.searchsorted(grid, ts[-1] + eps, side="right")
         if hi > lo:
             out[lo:hi] = CubicSpline(ts, vs)(grid[lo:hi])
     stats = AlignStats(

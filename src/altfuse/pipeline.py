@@ -63,12 +63,14 @@ class FuseRun:
 def _require_sensors(names: tuple[str, ...], options: FuseOptions, dropped: dict[str, str]) -> None:
     if len(names) >= options.min_sensors:
         return
-    found = ", ".join(names) or "none"
-    why = "; ".join(f"{k}: {v}" for k, v in dropped.items())
+    why = "".join(f"; {k}: {v}" for k, v in dropped.items())
+    if not names:
+        raise NoUsableSensorsError(
+            f"no usable altitude source in the log (looked for GPS, BARO, RFND, SONR, CTUN){why}"
+        )
     raise NoUsableSensorsError(
-        f"{len(names)} usable altitude source(s) ({found}), {options.min_sensors} needed"
-        + (f" [{why}]" if why else "")
-        + (" (--min-sensors 1 writes a single source)" if names and options.min_sensors > 1 else "")
+        f"{len(names)} usable altitude source ({', '.join(names)}) where --min-sensors "
+        f"is {options.min_sensors}{why}; --min-sensors 1 writes a single source"
     )
 
 

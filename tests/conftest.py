@@ -1,0 +1,72 @@
+"""Shared fixtures: the real logs, the sample log, and synthetic flights with known truth."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+from altfuse.model import FloatArray
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE_LOG = ROOT / "sample_logs" / "sim_flight.bin"
+SHARED_LOGS = Path(os.environ.get("ALTFUSE_SHARED_LOGS", ROOT.parent / "shared" / "logs"))
+
+
+def shared_log(relative: str) -> Path:
+    """Path of a log in ../shared/logs; skips the test if absent, or fails it under CI's
+    ``ALTFUSE_REQUIRE_SHARED_LOGS=1``."""
+    path = SHARED_LOGS / relative
+    if not path.exists():
+        message = f"{path} not found (the real logs live in ../shared/logs)"
+        if os.environ.get("ALTFUSE_REQUIRE_SHARED_LOGS") == "1":
+            pytest.fail(message)
+        pytest.skip(message)
+    return path
+
+
+def ardupilot_logs() -> list[str]:
+    folder = SHARED_LOGS / "ardupilot"
+    return sorted(p.name for p in folder.iterdir()) if folder.is_dir() else []
+
+
+@dataclass(frozen=True)
+class PaperAFlight:
+    """Paper A's experiment (ALGORITHMS.md section 2): 400 ticks at 10 Hz near 15 m."""
+
+    truth: FloatArray
+    z: FloatArray  # (400, 3): gps, baro, sonar, already referred to the take-off point
+    names: ClassVar[tuple[str, ...]] = ("gps", "baro", "sonar")
+    agree: ClassVar[slice] = slice(0, 136)  # samples 1-136: the sensors agree
+    baro_departs: ClassVar[slice] = slice(136, 255)  # samples 137-255: the barometer departs
+    scatter: ClassVar[slice] = slice(255, 400)  # samples 256-400: all scatter, sonar steadiest
+
+
+def paper_a_flight(seed: int = 7) -> PaperAFlight:
+    """A seeded synthetic version of Paper A's level flight (Table 1, Fig. 3-5).
+
+    Level flight near 15 m with a slow 0.3 m wander. Regime 1: GPS sigma 0.15 m, baro 0.10 m,
+    sonar 0.05 m. Regime 2: the barometer departs, ramping to +2.5 m and back (sigma 0.25 m).
+    Regime 3: every sensor scatters (GPS sigma 0.6 m, baro 0.5 m), the sonar least (0.12 m).
+    """
+    rng = np.random.default_rng(seed)
+    n = 400
+    k = np.arange(n)
+    truth = 15.0 + 0.3 * np.sin(2 * np.pi * k / 160.0)
+    sigma = np.empty((n, 3))
+    sigma[:136] = (0.15, 0.10, 0.05)
+    sigma[136:255] = (0.15, 0.25, 0.05)
+    sigma[255:] = (0.60, 0.50, 0.12)
+    z = truth[:, None] + rng.normal(0.0, 1.0, (n, 3)) * sigma
+    departure = 2.5 * np.sin(np.pi * (k[136:255] - 136) / 119.0)
+    z[136:255, 1] += departure
+    return PaperAFlight(truth=truth, z=z)
+
+
+@pytest.fixture
+def paper_a() -> PaperAFlight:
+    return paper_a_flight()

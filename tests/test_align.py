@@ -1,0 +1,115 @@
+"""Resampling onto one clock (ALGORITHMS.md section 1)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from altfuse.align import align, cell_means, merge_duplicates, resample
+from altfuse.errors import NoUsableSensorsError, ParameterError
+from altfuse.model import Series
+
+
+def series(name: str, t: np.ndarray, v: np.ndarray, kind: str = "baro") -> Series:
+    return Series(name, kind, f"{name}.Alt", "test", t.astype(float), v.astype(float))
+
+
+def test_spline_upsamples_a_smooth_signal_accurately() -> None:
+    t = np.arange(0.0, 20.0, 0.2) + 0.05  # 5 Hz GPS, off the 10 Hz ticks
+    grid = np.arange(1.0, 19.0, 0.1)
+    out, stats = resample(t, np.sin(t / 2), grid, 10.0, 1.0)
+    np.testing.assert_allclose(out, np.sin(grid / 2), atol=2e-5)
+    assert stats.segments == 1
+    assert stats.cells_averaged == 0
+
+
+def test_gap_longer_than_max_gap_is_nan_not_invented() -> None:
+    t = np.concatenate([np.arange(0.0, 5.0, 0.2), np.arange(8.0, 12.0, 0.2)])
+    grid = np.arange(0, 121) / 10.0
+    out, stats = resample(t, 3.0 + 0 * t, grid, 10.0, max_gap_s=1.0)
+    assert np.isnan(out[(grid > 4.8 + 1e-9) & (grid < 8.0 - 1e-9)]).all()
+    assert np.isfinite(out[grid <= 4.8 + 1e-9]).all()
+    assert stats.gaps_over_max == 1
+    # the same data with a generous max gap is bridged
+    bridged, _ = resample(t, 3.0 + 0 * t, grid, 10.0, max_gap_s=5.0)
+    assert np.isfinite(bridged[grid <= 11.8 + 1e-9]).all()
+
+
+def test_no_extrapolation_outside_the_data() -> None:
+    grid = np.arange(0, 101) / 10.0
+    out, _ = resample(np.array([2.0, 2.5, 3.0, 3.5]), np.ones(4), grid, 10.0, 1.0)
+    assert np.isnan(out[grid < 2.0 - 1e-9]).all()
+    assert np.isnan(out[grid > 3.5 + 1e-9]).all()
+
+
+def test_duplicates_merged_and_unsorted_sorted() -> None:
+    t = np.array([3.0, 1.0, 2.0, 2.0, 4.0])
+    v = np.array([30.0, 10.0, 19.0, 21.0, 40.0])
+    ts, vs = merge_duplicates(t, v)
+    np.testing.assert_array_equal(ts, [1.0, 2.0, 3.0, 4.0])
+    np.testing.assert_array_equal(vs, [10.0, 20.0, 30.0, 40.0])
+    out, stats = resample(t, v, np.array([1.0, 2.0, 2.5, 4.0]), 10.0, 2.0)
+    np.testing.assert_allclose(out, [10.0, 20.0, 25.0, 40.0], atol=1e-9)
+    assert stats.duplicates_merged == 1
+
+
+def test_fast_noisy_sensor_is_averaged_before_decimation() -> None:
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 60.0, 0.01)  # 100 Hz
+    noise = rng.normal(0.0, 1.0, t.size)
+    grid = np.arange(10, 590) / 10.0
+    out, stats = resample(t, 5.0 + noise, grid, 10.0, 1.0)
+    # ten samples per cell: the noise on the clock is ~1/sqrt(10) of the raw noise
+    assert np.std(out - 5.0) == pytest.approx(1 / np.sqrt(10), rel=0.15)
+    # 6000 samples fall into the 601 cells of the ticks 0.0 s .. 60.0 s
+    assert stats.cells_averaged == 6000 - 601
+
+
+def test_cell_means_leave_a_slow_sensor_alone() -> None:
+    t = np.arange(0.0, 5.0, 0.2)
+    ts, vs = cell_means(t, t * 2, 10.0)
+    np.testing.assert_array_equal(ts, t)
+    np.testing.assert_array_equal(vs, t * 2)
+
+
+def test_align_union_and_overlap_grids() -> None:
+    a = series("baro", np.arange(10.0, 20.0, 0.05), np.ones(200))
+    b = series("gps", np.arange(12.02, 25.0, 0.2), np.ones(65), kind="gps")
+    union = align([a, b], rate_hz=10.0, span="union")
+    assert union.t[0] == 10.0
+    assert union.t[-1] == pytest.approx(24.8)
+    assert union.z.shape == (union.t.size, 2)
+    np.testing.assert_allclose(np.diff(union.t), 0.1)
+    overlap = align([a, b], rate_hz=10.0, span="overlap")
+    assert overlap.t[0] == pytest.approx(12.1)
+    assert overlap.t[-1] == pytest.approx(19.9)
+    assert overlap.names == ("baro", "gps")
+
+
+def test_ticks_fall_on_round_times_of_the_log_clock() -> None:
+    a = series("baro", np.arange(100.03, 110.0, 0.05), np.ones(200))
+    out = align([a], rate_hz=4.0)
+    np.testing.assert_array_equal(out.t * 4.0, np.round(out.t * 4.0))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "option"),
+    [
+        ({"rate_hz": 0.0}, "--rate"),
+        ({"rate_hz": -5.0}, "--rate"),
+        ({"rate_hz": float("nan")}, "--rate"),
+        ({"max_gap_s": 0.0}, "--max-gap"),
+        ({"span": "all"}, "--span"),
+    ],
+)
+def test_nonsense_parameters(kwargs: dict[str, object], option: str) -> None:
+    a = series("baro", np.arange(0.0, 5.0, 0.1), np.ones(50))
+    with pytest.raises(ParameterError, match=option):
+        align([a], **kwargs)  # type: ignore[arg-type]
+
+
+def test_disjoint_sensors_have_no_overlap() -> None:
+    a = series("baro", np.arange(0.0, 5.0, 0.1), np.ones(50))
+    b = series("gps", np.arange(10.0, 15.0, 0.2), np.ones(25), kind="gps")
+    with pytest.raises(NoUsableSensorsError, match="overlap"):
+        align([a, b], span="overlap")

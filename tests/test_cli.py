@@ -1,0 +1,259 @@
+"""The command line as a user meets it: exit codes, files, one-line messages."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner, Result
+
+from altfuse import __version__
+from altfuse.cli import cli
+from altfuse.fuse import FUSERS
+from conftest import SAMPLE_LOG, ardupilot_logs, shared_log
+
+
+def run(*args: str | Path) -> Result:
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def assert_one_line_error(result: Result, code: int, fragment: str) -> None:
+    assert result.exit_code == code, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("altfuse: error: ")
+    assert fragment in lines[0]
+    assert "Traceback" not in result.output
+
+
+def sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_fuse_sample_log_writes_csv_weights_and_provenance(tmp_path: Path) -> None:
+    out = tmp_path / "out.csv"
+    before = sha(SAMPLE_LOG)
+    result = run("fuse", SAMPLE_LOG, "-o", out, "--weights", tmp_path / "w.csv")
+    assert result.exit_code == 0, result.output
+    assert sha(SAMPLE_LOG) == before
+    table = pd.read_csv(out)
+    sensors = ["gps", "baro", "rangefinder"]
+    assert list(table.columns) == (
+        ["time_s"]
+        + [f"alt_{s}_m" for s in sensors]
+        + ["fused_alt_m", "status", "n_sensors"]
+        + [f"weight_{s}" for s in sensors]
+        + [f"support_{s}" for s in sensors]
+    )
+    assert len(table) == 1200
+    np.testing.assert_allclose(np.diff(table.time_s), 0.1, atol=1e-6)
+    assert table.time_s.iloc[0] == pytest.approx(30.0)  # the log's own clock
+    weights = table[[f"weight_{s}" for s in sensors]].sum(axis=1)
+    np.testing.assert_allclose(weights, 1.0, atol=1e-5)
+    assert table.fused_alt_m.notna().all()
+    meta = json.loads((tmp_path / "out.meta.json").read_text())
+    assert meta["input"]["sha256"] == before
+    assert meta["altfuse_version"] == __version__
+    assert meta["method"] == "support"
+    assert {o["sensor"] for o in meta["datum"]["offsets"]} == set(sensors)
+    gps = next(o for o in meta["datum"]["offsets"] if o["sensor"] == "gps")
+    assert gps["offset_m"] == pytest.approx(112.0, abs=0.5)  # the simulated home, AMSL
+    traces = pd.read_csv(tmp_path / "w.csv")
+    for key in ("weight", "lambda", "support", "support_mean", "support_var"):
+        assert f"{key}_baro" in traces.columns
+    assert not list(tmp_path.glob(".*tmp"))
+
+
+@pytest.mark.parametrize("method", sorted(FUSERS))
+def test_every_method_runs_from_the_cli(tmp_path: Path, method: str) -> None:
+    result = run("fuse", SAMPLE_LOG, "-o", tmp_path / "o.csv", "--method", method)
+    assert result.exit_code == 0, result.output
+    assert f"method {method}" in result.stdout
+
+
+def test_fused_sample_is_close_to_the_simulated_truth(tmp_path: Path) -> None:
+    out = tmp_path / "o.csv"
+    assert run("fuse", SAMPLE_LOG, "-o", out).exit_code == 0
+    table = pd.read_csv(out)
+    from altfuse.io import read_log
+    from altfuse.simulate import HOME_AMSL_M
+
+    sim = next(r for r in read_log(SAMPLE_LOG).references if r.name == "sim")
+    truth = np.interp(table.time_s, sim.t, sim.value) - HOME_AMSL_M
+    rmse = float(np.sqrt(np.mean((table.fused_alt_m - truth) ** 2)))
+    # measured: support 0.51 m, mean 0.55 m, best single sensor 0.58 m
+    assert rmse < 0.56
+
+
+def bad_inputs(tmp_path: Path) -> dict[str, Path]:
+    text = tmp_path / "notes.txt"
+    text.write_text("this is not a log\n")
+    empty = tmp_path / "empty.bin"
+    empty.touch()
+    return {"missing": tmp_path / "missing.bin", "text": text, "empty": empty}
+
+
+@pytest.mark.parametrize(
+    ("case", "fragment"),
+    [("missing", "no such file"), ("text", "not a DataFlash log"), ("empty", "empty")],
+)
+def test_bad_files(tmp_path: Path, case: str, fragment: str) -> None:
+    out = tmp_path / "out.csv"
+    result = run("fuse", bad_inputs(tmp_path)[case], "-o", out)
+    assert_one_line_error(result, 1, fragment)
+    assert not out.exists()
+    assert not (tmp_path / "out.meta.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["--rate", "0"], "--rate"),
+        (["--rate", "-3"], "--rate"),
+        (["--max-gap", "0"], "--max-gap"),
+        (["--method", "kalman"], "'kalman' is not one of"),
+        (["--alpha", "-1"], "--alpha"),
+        (["--alpha", "wide"], "--alpha"),
+        (["--beta", "-1"], "--beta"),
+        (["--window", "-2"], "--window"),
+        (["--min-sensors", "0"], "--min-sensors"),
+        (["--method", "mean", "--beta", "3"], "--beta does not apply"),
+    ],
+)
+def test_nonsense_parameters(tmp_path: Path, args: list[str], fragment: str) -> None:
+    out = tmp_path / "out.csv"
+    result = run("fuse", SAMPLE_LOG, "-o", out, *args)
+    assert_one_line_error(result, 2, fragment)
+    assert not out.exists()
+
+
+def test_output_onto_the_input_is_refused(tmp_path: Path) -> None:
+    log = tmp_path / "log.bin"
+    log.write_bytes(SAMPLE_LOG.read_bytes())
+    result = run("fuse", log, "-o", log)
+    assert_one_line_error(result, 2, "is the input log")
+    assert sha(log) == sha(SAMPLE_LOG)
+
+
+def test_truncated_logs_never_crash(tmp_path: Path) -> None:
+    """A log cut anywhere is processed up to its last whole record, or refused in one line."""
+    data = SAMPLE_LOG.read_bytes()
+    rng = np.random.default_rng(11)
+    cuts = [1, 2, 50, 89, 90, 400, 3000, *rng.integers(3000, len(data), 12).tolist()]
+    outcomes = {0: 0, 1: 0}
+    for cut in cuts:
+        log = tmp_path / f"cut{cut}.bin"
+        log.write_bytes(data[:cut])
+        out = tmp_path / f"cut{cut}.csv"
+        result = run("fuse", log, "-o", out)
+        assert result.exit_code in (0, 1), (cut, result.output)
+        outcomes[result.exit_code] += 1
+        if result.exit_code == 0:
+            assert len(pd.read_csv(out)) > 0
+        else:
+            assert_one_line_error(result, 1, "")
+            assert not out.exists()
+        assert log.read_bytes() == data[:cut]
+    assert outcomes[1] >= 7  # every cut before the first sensor record
+    assert outcomes[0] >= 10
+
+
+# Every log in ../shared/logs/ardupilot has a decided outcome: (exit code, sensors or message).
+OUTCOMES: dict[str, tuple[int, str]] = {
+    "ardusubtools_small.BIN": (1, "ArduSub log; its BARO is water depth"),
+    "beastayyg_log_0036_mechanical_failure.bin": (0, "gps, baro"),
+    "beastayyg_log_0038_mechanical_failure.bin": (0, "gps, baro, rangefinder"),
+    "beastayyg_log_0039_mechanical_failure.bin": (0, "gps, baro, rangefinder"),
+    "beastayyg_sample.bin": (0, "gps, baro"),
+    "diaven_sample01.bin": (0, "gps, gps2, baro, rangefinder"),
+    "hatemslah_demo-flight.bin": (1, "no usable altitude source"),
+    "pfcFlightData_center_0003.bin": (1, "1 usable altitude source (gps)"),
+    "pymavlink_test.BIN": (0, "gps, baro"),
+    "rima48_test_cascade.BIN": (0, "gps, baro"),
+    "spark404_log.bin": (0, "gps, baro"),
+}
+
+
+def test_every_shared_log_has_a_decided_outcome() -> None:
+    shared_log("ardupilot")
+    assert ardupilot_logs() == sorted(OUTCOMES)
+
+
+@pytest.mark.parametrize("name", sorted(OUTCOMES))
+def test_shared_log_outcome(tmp_path: Path, name: str) -> None:
+    log = shared_log(f"ardupilot/{name}")
+    code, expected = OUTCOMES[name]
+    out = tmp_path / "out.csv"
+    before = sha(log)
+    result = run("fuse", log, "-o", out)
+    assert sha(log) == before
+    if code == 0:
+        assert result.exit_code == 0, result.output
+        assert f"sensors {expected};" in result.stdout
+        assert pd.read_csv(out).fused_alt_m.notna().any()
+    else:
+        assert_one_line_error(result, code, expected)
+        assert not out.exists()
+
+
+def test_single_source_log_with_min_sensors_one(tmp_path: Path) -> None:
+    log = shared_log("ardupilot/pfcFlightData_center_0003.bin")
+    out = tmp_path / "out.csv"
+    result = run("fuse", log, "-o", out, "--min-sensors", "1")
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(out)
+    assert set(table.status.dropna()) <= {"single", "none"}
+
+
+def test_skipped_bytes_are_one_warning_line(tmp_path: Path) -> None:
+    result = run("fuse", shared_log("ardupilot/rima48_test_cascade.BIN"), "-o", tmp_path / "o.csv")
+    assert result.exit_code == 0
+    assert result.stderr.strip().splitlines() == [
+        "altfuse: warning: rima48_test_cascade.BIN: 50723 bytes were not part of any decodable "
+        "record and were skipped"
+    ]
+
+
+def test_info_text_and_json() -> None:
+    result = run("info", SAMPLE_LOG)
+    assert result.exit_code == 0
+    assert "gps" in result.stdout
+    assert "RFND.Dist" in result.stdout
+    assert "sim (SIM.Alt" in result.stdout
+    data = json.loads(run("info", SAMPLE_LOG, "--json").stdout)
+    assert [s["name"] for s in data["sensors"]] == ["gps", "baro", "rangefinder"]
+    gps = data["sensors"][0]
+    assert gps["rate_hz"] == pytest.approx(5.0)
+    assert gps["samples_dropped"] == {"GPS Status < 3 (no 3D fix)": 15}
+    assert [r["name"] for r in data["references"]] == ["sim"]
+
+
+def test_info_on_a_bad_file(tmp_path: Path) -> None:
+    assert_one_line_error(run("info", bad_inputs(tmp_path)["text"]), 1, "not a DataFlash log")
+
+
+def test_version_and_help() -> None:
+    assert run("--version").stdout.strip() == f"altfuse, version {__version__}"
+    for command in ("fuse", "info", "simulate"):
+        result = run(command, "--help")
+        assert result.exit_code == 0
+        assert "Example" in result.stdout
+
+
+def test_simulate_is_reproducible(tmp_path: Path) -> None:
+    a, b = tmp_path / "a.bin", tmp_path / "b.bin"
+    assert run("simulate", "-o", a, "--seed", "4", "--duration", "60").exit_code == 0
+    assert run("simulate", "-o", b, "--seed", "4", "--duration", "60").exit_code == 0
+    assert a.read_bytes() == b.read_bytes()
+    assert_one_line_error(run("simulate", "-o", a, "--duration", "5"), 2, "--duration")
+
+
+def test_committed_sample_log_is_what_simulate_writes(tmp_path: Path) -> None:
+    """sample_logs/sim_flight.bin is regenerated by the README's command, byte for byte."""
+    out = tmp_path / "s.bin"
+    assert run("simulate", "-o", out, "--seed", "0", "--duration", "120").exit_code == 0
+    assert out.read_bytes() == SAMPLE_LOG.read_bytes()
