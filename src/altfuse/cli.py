@@ -12,6 +12,7 @@ import logging
 import math
 import sys
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -107,15 +108,19 @@ def cli(verbose: int, quiet: bool, debug: bool) -> None:  # noqa: ARG001 (read i
 _LOG_ARG = click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
 
 
+def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    return click.option(
+        "-o",
+        "--output",
+        type=click.Path(dir_okay=False, path_type=Path),
+        required=True,
+        help=help_text,
+    )
+
+
 @cli.command()
 @_LOG_ARG
-@click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="The fused CSV to write; the provenance goes beside it as NAME.meta.json.",
-)
+@_output_option("The fused CSV to write; the provenance goes beside it as NAME.meta.json.")
 @click.option(
     "-m",
     "--method",
@@ -295,13 +300,7 @@ def info(log: Path, as_json: bool) -> None:
 
 
 @cli.command()
-@click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="The DataFlash log to write.",
-)
+@_output_option("The DataFlash log to write.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 @click.option(
     "--duration",

@@ -57,6 +57,7 @@ _SELF_SCALED = frozenset("cCeEL")
 #: Multiplier ids that mean "none" ('-'), "unknown" ('?') or 1 ('0').
 _NO_MULTIPLIER = frozenset("-?0")
 _LENGTH_UNITS_OK = frozenset({"m", "", "UNKNOWN"})
+_GROUND = "ground below the vehicle"
 
 _FIRMWARE_RE = re.compile(
     r"\b(ArduCopter|APM:Copter|ArduPlane|APM:Plane|ArduRover|APM:Rover|ArduSub|"
@@ -154,10 +155,10 @@ def _as_float(value: Any) -> float:
         return math.nan
 
 
-def _instances(rec: _Records, type_name: str, field: str | None, default: int) -> Iterator[Any]:
+def _instances(rec: _Records, type_name: str, field: str, default: int) -> Iterator[Any]:
     """Yield (instance number, boolean mask) for each instance in ``type_name``'s records."""
     n = len(rec.by_type[type_name])
-    if field is None or not rec.has(type_name, field):
+    if not rec.has(type_name, field):
         yield default, np.ones(n, dtype=bool)
         return
     inst = rec.raw(type_name, field)
@@ -224,21 +225,45 @@ class _Builder:
         )
 
 
+def _add_instances(
+    b: _Builder,
+    kind: str,
+    type_name: str,
+    col: str,
+    datum: str,
+    *,
+    instance_field: str,
+    default: int,
+    invalid: dict[str, Any],
+) -> None:
+    """Add one series per instance of ``type_name.col``, named ``kind``, ``kind2``, ..."""
+    for inst, sel in _instances(b.rec, type_name, instance_field, default):
+        b.add(
+            name=_instance_name(kind, inst),
+            kind=kind,
+            type_name=type_name,
+            col=col,
+            datum=datum,
+            select=sel,
+            invalid=invalid,
+        )
+
+
 def _read_gps(b: _Builder) -> None:
     for default, type_name in enumerate(("GPS", "GPS2", "GPS3")):
         if not b.rec.has(type_name, "Alt", "Status"):
             continue
         no_fix = b.rec.raw(type_name, "Status") < 3
-        for inst, sel in _instances(b.rec, type_name, "I", default):
-            b.add(
-                name=_instance_name("gps", inst),
-                kind="gps",
-                type_name=type_name,
-                col="Alt",
-                datum="AMSL",
-                select=sel,
-                invalid={"GPS Status < 3 (no 3D fix)": no_fix},
-            )
+        _add_instances(
+            b,
+            "gps",
+            type_name,
+            "Alt",
+            "AMSL",
+            instance_field="I",
+            default=default,
+            invalid={"GPS Status < 3 (no 3D fix)": no_fix},
+        )
 
 
 def _read_baro(b: _Builder) -> bool:
@@ -252,16 +277,16 @@ def _read_baro(b: _Builder) -> bool:
             if b.rec.has(type_name, health):
                 invalid["flagged unhealthy"] = b.rec.raw(type_name, health) == 0
                 break
-        for inst, sel in _instances(b.rec, type_name, "I", default):
-            b.add(
-                name=_instance_name("baro", inst),
-                kind="baro",
-                type_name=type_name,
-                col="Alt",
-                datum="baro calibration",
-                select=sel,
-                invalid=invalid,
-            )
+        _add_instances(
+            b,
+            "baro",
+            type_name,
+            "Alt",
+            "baro calibration",
+            instance_field="I",
+            default=default,
+            invalid=invalid,
+        )
     return found
 
 
@@ -276,17 +301,16 @@ def _read_rangefinder(b: _Builder) -> bool:
     rfnd = "RFND"
     if b.rec.has(rfnd, "Dist"):
         found = True
-        invalid = _rangefinder_invalid(b, rfnd, "Dist", "Stat")
-        for inst, sel in _instances(b.rec, rfnd, "Instance", 0):
-            b.add(
-                name=_instance_name("rangefinder", inst),
-                kind="rangefinder",
-                type_name=rfnd,
-                col="Dist",
-                datum="ground below the vehicle",
-                select=sel,
-                invalid=invalid,
-            )
+        _add_instances(
+            b,
+            "rangefinder",
+            rfnd,
+            "Dist",
+            _GROUND,
+            instance_field="Instance",
+            default=0,
+            invalid=_rangefinder_invalid(b, rfnd, "Dist", "Stat"),
+        )
     elif rfnd in b.rec.by_type:
         for inst in (0, 1):
             dist = f"Dist{inst + 1}"
@@ -298,7 +322,7 @@ def _read_rangefinder(b: _Builder) -> bool:
                 kind="rangefinder",
                 type_name=rfnd,
                 col=dist,
-                datum="ground below the vehicle",
+                datum=_GROUND,
                 select=np.ones(len(b.rec.by_type[rfnd]), dtype=bool),
                 invalid=_rangefinder_invalid(b, rfnd, dist, f"Stat{inst + 1}"),
             )
@@ -310,7 +334,7 @@ def _read_rangefinder(b: _Builder) -> bool:
                 kind="rangefinder",
                 type_name="SONR",
                 col=col,
-                datum="ground below the vehicle",
+                datum=_GROUND,
                 select=np.ones(len(b.rec.by_type["SONR"]), dtype=bool),
                 invalid={"0 (no reading)": b.rec.raw("SONR", col) <= 0},
             )
