@@ -83,3 +83,23 @@ def test_nonsense_parameters(ground_s: float, climb_m: float) -> None:
     aligned, _ = flight()
     with pytest.raises(ParameterError):
         refer_to_takeoff(aligned, ground_s, climb_m)
+
+
+def test_rangefinder_tilt_correction() -> None:
+    from altfuse.datum import tilt_correct
+    from altfuse.model import Attitude, Series
+
+    t = np.array([0.5, 1.0, 2.0, 9.0])
+    rfnd = Series("rangefinder", "rangefinder", "RFND.Dist", "ground", t, np.full(4, 10.0))
+    att_t = np.array([0.0, 5.0])
+    att = Attitude("ATT", att_t, np.radians([30.0, 30.0]), np.radians([0.0, 60.0]), np.zeros(2))
+    out = tilt_correct(rfnd, att)
+    # roll 30°, pitch 60° * t / 5: d cos(30°) cos(pitch)
+    expected = 10.0 * np.cos(np.radians(30.0)) * np.cos(np.radians(60.0 * t[:3] / 5.0))
+    np.testing.assert_allclose(out.value, expected, rtol=1e-12)
+    assert out.dropped == {"outside the attitude's time range": 1}
+    assert "tilt-corrected with ATT" in out.datum
+    # CTUN.SAlt comes tilt-corrected by the autopilot; no attitude: unchanged and said so
+    salt = Series("rangefinder", "rangefinder", "CTUN.SAlt", "ground", t, np.full(4, 10.0))
+    assert tilt_correct(salt, att) is salt
+    assert "not tilt-corrected" in tilt_correct(rfnd, None).datum

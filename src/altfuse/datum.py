@@ -18,12 +18,16 @@ with one constant offset ``c_i``, found in this order:
 
 A constant offset is all that is removed: a source that is right but offset keeps its full
 weight, and drift (the barometer's) stays in the data, where fusion is meant to see it.
+
+Before that, :func:`tilt_correct` turns a rangefinder's distance along the body's down axis into a
+vertical height, ``d * cos(roll) * cos(pitch)``, with the logged attitude (``CTUN.SAlt`` comes
+tilt-corrected by the autopilot and is left alone).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -31,7 +35,7 @@ import pandas as pd
 
 from altfuse.align import Aligned
 from altfuse.errors import NoUsableSensorsError, ParameterError
-from altfuse.model import SENSOR_KINDS, FloatArray
+from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Series
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
 MIN_WINDOW_TICKS = 3
@@ -63,6 +67,32 @@ class Referred:
     ground_window_s: tuple[float, float]
     offsets: tuple[Offset, ...]
     dropped: dict[str, str]
+
+
+def tilt_correct(series: Series, attitude: Attitude | None) -> Series:
+    """Vertical height from a downward rangefinder's distance [m]: ``d cos(roll) cos(pitch)``.
+
+    Only for ``RFND``/``SONR`` distances, and only where the attitude covers the sample (the
+    samples outside its time range are dropped, counted in ``dropped``). Without attitude the
+    series is returned unchanged, and its datum says so.
+    """
+    if series.kind != "rangefinder" or not series.source.startswith(("RFND", "SONR")):
+        return series
+    if attitude is None or attitude.t.size < 2:
+        return replace(series, datum=f"{series.datum} (not tilt-corrected: no attitude)")
+    inside = (series.t >= attitude.t[0]) & (series.t <= attitude.t[-1])
+    roll = np.interp(series.t[inside], attitude.t, attitude.roll)
+    pitch = np.interp(series.t[inside], attitude.t, attitude.pitch)
+    dropped = dict(series.dropped)
+    if (~inside).any():
+        dropped["outside the attitude's time range"] = int((~inside).sum())
+    return replace(
+        series,
+        datum=f"{series.datum} (tilt-corrected with {attitude.source})",
+        t=series.t[inside],
+        value=series.value[inside] * np.cos(roll) * np.cos(pitch),
+        dropped=dropped,
+    )
 
 
 def check_datum_parameters(ground_s: float, climb_m: float) -> None:

@@ -12,11 +12,11 @@ import numpy as np
 
 from altfuse import __version__
 from altfuse.align import Aligned, align, check_align_parameters
-from altfuse.datum import Referred, check_datum_parameters, refer_to_takeoff
+from altfuse.datum import Referred, check_datum_parameters, refer_to_takeoff, tilt_correct
 from altfuse.errors import NoUsableSensorsError, ParameterError, UnsupportedLogError
 from altfuse.fuse import FUSERS, FusionResult
 from altfuse.io import read_log
-from altfuse.model import FlightLog
+from altfuse.model import FlightLog, Series
 
 
 @dataclass(frozen=True)
@@ -60,16 +60,18 @@ class FuseRun:
     provenance: dict[str, Any]
 
 
-def _require_sensors(names: tuple[str, ...], options: FuseOptions, dropped: dict[str, str]) -> None:
+def _require_sensors(
+    log_name: str, names: tuple[str, ...], options: FuseOptions, dropped: dict[str, str]
+) -> None:
     if len(names) >= options.min_sensors:
         return
     why = "".join(f"; {k}: {v}" for k, v in dropped.items())
     if not names:
         raise NoUsableSensorsError(
-            f"no usable altitude source in the log (looked for GPS, BARO, RFND, SONR, CTUN){why}"
+            f"{log_name}: no usable altitude source (looked for GPS, BARO, RFND, SONR, CTUN){why}"
         )
     raise NoUsableSensorsError(
-        f"{len(names)} usable altitude source ({', '.join(names)}) where --min-sensors "
+        f"{log_name}: {len(names)} usable altitude source ({', '.join(names)}) where --min-sensors "
         f"is {options.min_sensors}{why}; --min-sensors 1 writes a single source"
     )
 
@@ -77,17 +79,20 @@ def _require_sensors(names: tuple[str, ...], options: FuseOptions, dropped: dict
 def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
     """Fuse the altitude sources of an already-read log."""
     options.check()
+    name = Path(flight.path).name
     if flight.vehicle == "sub":
         raise UnsupportedLogError(
-            f"{Path(flight.path).name}: an ArduSub log; its BARO is water depth, "
+            f"{name}: an ArduSub log; its BARO is water depth, "
             "and altfuse fuses the altitude of aircraft"
         )
     dropped = dict(flight.dropped_sources)
-    _require_sensors(tuple(s.name for s in flight.sensors), options, dropped)
-    aligned = align(flight.sensors, options.rate_hz, options.max_gap_s, options.span)
+    _require_sensors(name, tuple(s.name for s in flight.sensors), options, dropped)
+    sensors = [tilt_correct(s, flight.attitude) for s in flight.sensors]
+    sensors = [s for s in sensors if s.t.size]
+    aligned = align(sensors, options.rate_hz, options.max_gap_s, options.span)
     referred = refer_to_takeoff(aligned, options.ground_s, options.climb_m)
     dropped.update(referred.dropped)
-    _require_sensors(referred.names, options, dropped)
+    _require_sensors(name, referred.names, options, dropped)
     result = FUSERS[options.method](referred.h, **options.params)
     return FuseRun(
         log=flight,
@@ -95,7 +100,7 @@ def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
         referred=referred,
         result=result,
         options=options,
-        provenance=provenance(flight, aligned, referred, result, dropped),
+        provenance=provenance(flight, sensors, aligned, referred, result, dropped),
     )
 
 
@@ -108,6 +113,7 @@ def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
 
 def provenance(
     flight: FlightLog,
+    sensors: list[Series],
     aligned: Aligned,
     referred: Referred,
     result: FusionResult,
@@ -164,7 +170,7 @@ def provenance(
                 "samples_dropped": s.dropped,
                 "alignment": vars(aligned.stats[s.name]),
             }
-            for s in flight.sensors
+            for s in sensors
             if s.name in referred.names
         ],
         "sensors_dropped": dropped,
