@@ -21,6 +21,13 @@ import click
 from altfuse import __version__
 from altfuse.errors import AltfuseError, ParameterError
 from altfuse.fuse import FUSERS
+from altfuse.fuse.complementary import (
+    DEFAULT_E_MAX_M,
+    DEFAULT_LAYER1_Q,
+    DEFAULT_REOPEN_S,
+    DEFAULT_T_S,
+)
+from altfuse.fuse.delay import DEFAULT_Q, FORMS
 from altfuse.fuse.support import DEFAULT_BETA, DEFAULT_WINDOW
 from altfuse.info import describe
 from altfuse.io import read_log
@@ -28,6 +35,8 @@ from altfuse.pipeline import FuseOptions, fuse_log
 from altfuse.write import default_meta_path, write_outputs
 
 EXIT_BUG = 3
+#: Options that are parameters of a fusion method (passed on only when given).
+METHOD_OPTIONS = ("alpha", "beta", "window", "form", "q", "time_constant", "e_max", "reopen")
 
 
 class _OneLineFormatter(logging.Formatter):
@@ -171,6 +180,38 @@ def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..
     help=f"support: k, previous ticks in the window [default {DEFAULT_WINDOW}].",
 )
 @click.option(
+    "--form",
+    type=click.Choice(FORMS),
+    default=None,
+    help="delay1/delay2/multilayer: temporal recursion, 'practical' (random walk, default) or "
+    "'paper' (constant altitude).",
+)
+@click.option(
+    "--q",
+    type=float,
+    default=None,
+    help="delay1/delay2/multilayer: process noise [m^2 per tick] "
+    f"[default {DEFAULT_Q:g}; multilayer {DEFAULT_LAYER1_Q:g}].",
+)
+@click.option(
+    "--time-constant",
+    type=float,
+    default=None,
+    help=f"multilayer: complementary filter time constant T [s] [default {DEFAULT_T_S:g}].",
+)
+@click.option(
+    "--e-max",
+    type=float,
+    default=None,
+    help=f"multilayer: gate threshold on the correction [m] [default {DEFAULT_E_MAX_M:g}].",
+)
+@click.option(
+    "--reopen",
+    type=float,
+    default=None,
+    help=f"multilayer: seconds before a shut gate reopens [default {DEFAULT_REOPEN_S:g}].",
+)
+@click.option(
     "--ground-window",
     "ground_s",
     type=float,
@@ -220,8 +261,9 @@ def fuse(
       altfuse fuse flight.bin -o flight.csv
       altfuse fuse flight.bin -o flight.csv --method mean --rate 20
       altfuse fuse flight.bin -o flight.csv --alpha 0.5 --beta 10 --weights w.csv
+      altfuse fuse flight.bin -o flight.csv --method multilayer --time-constant 2
     """
-    params = {k: options.pop(k) for k in ("alpha", "beta", "window")}
+    params = {k: options.pop(k) for k in METHOD_OPTIONS}
     params = {k: v for k, v in params.items() if v is not None}
     opts = FuseOptions(method=method, params=params, **options)
     opts.check()

@@ -14,9 +14,10 @@ from altfuse import __version__
 from altfuse.align import Aligned, align, check_align_parameters
 from altfuse.datum import Referred, check_datum_parameters, refer_to_takeoff, tilt_correct
 from altfuse.errors import NoUsableSensorsError, ParameterError, UnsupportedLogError
-from altfuse.fuse import FUSERS, FusionResult
+from altfuse.fuse import FUSERS, LOG_INPUTS, FusionResult
+from altfuse.inertial import on_clock, vertical_acceleration
 from altfuse.io import read_log
-from altfuse.model import FlightLog, Series
+from altfuse.model import FlightLog, FloatArray, Series
 
 
 @dataclass(frozen=True)
@@ -40,8 +41,10 @@ class FuseOptions:
             )
         accepted = inspect.signature(FUSERS[self.method]).parameters
         for name in self.params:
-            if name not in accepted or name == "z":
-                raise ParameterError(f"--{name} does not apply to method {self.method!r}")
+            if name not in accepted or name == "z" or name in LOG_INPUTS:
+                raise ParameterError(
+                    f"--{name.replace('_', '-')} does not apply to method {self.method!r}"
+                )
         check_align_parameters(self.rate_hz, self.max_gap_s, self.span)
         check_datum_parameters(self.ground_s, self.climb_m)
         if self.min_sensors < 1:
@@ -93,15 +96,59 @@ def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
     referred = refer_to_takeoff(aligned, options.ground_s, options.climb_m)
     dropped.update(referred.dropped)
     _require_sensors(name, referred.names, options, dropped)
-    result = FUSERS[options.method](referred.h, **options.params)
+    fuser = FUSERS[options.method]
+    inputs: dict[str, Any] = {}
+    wanted = _params(fuser)
+    if "accel_up" in wanted:
+        inputs["accel_up"], accel_record = accel_on_clock(flight, referred, options)
+    if "dt_s" in wanted:
+        inputs["dt_s"] = 1.0 / options.rate_hz
+    result = fuser(referred.h, **inputs, **options.params)
+    record = provenance(flight, sensors, aligned, referred, result, dropped)
+    if "accel_up" in inputs:
+        record["vertical_acceleration"] = accel_record
     return FuseRun(
         log=flight,
         aligned=aligned,
         referred=referred,
         result=result,
         options=options,
-        provenance=provenance(flight, sensors, aligned, referred, result, dropped),
+        provenance=record,
     )
+
+
+def accel_on_clock(
+    flight: FlightLog, referred: Referred, options: FuseOptions
+) -> tuple[FloatArray, dict[str, Any]]:
+    """Earth-frame vertical acceleration on the clock, less its at-rest reading.
+
+    Paper B subtracts the at-rest reading; here it is the median of ``a_up`` over the datum's
+    ground window (the vehicle still, on the ground or in a steady hover). The median, because
+    that window can end in the first second of a gentle take-off.
+    """
+    missing = [n for n, v in (("IMU", flight.imu), ("ATT", flight.attitude)) if v is None]
+    if flight.imu is None or flight.attitude is None:
+        others = ", ".join(m for m, f in FUSERS.items() if "accel_up" not in _params(f))
+        raise NoUsableSensorsError(
+            f"{Path(flight.path).name}: method {options.method!r} needs the accelerometer, and "
+            f"the log has no {' or '.join(missing)} records; {others} work without it"
+        )
+    t, a = vertical_acceleration(flight.imu, flight.attitude)
+    a_clock = on_clock(t, a, referred.t, options.rate_hz)
+    lo, hi = referred.ground_window_s
+    still = (referred.t >= lo) & (referred.t <= hi) & np.isfinite(a_clock)
+    bias = float(np.median(a_clock[still])) if still.any() else 0.0
+    record = {
+        "source": f"{flight.imu.source} rotated by {flight.attitude.source}",
+        "at_rest_bias_m_s2": bias,
+        "bias_window_s": [lo, hi],
+        "ticks_without_imu": int((~np.isfinite(a_clock)).sum()),
+    }
+    return a_clock - bias, record
+
+
+def _params(fuser: Any) -> set[str]:
+    return set(inspect.signature(fuser).parameters)
 
 
 def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:

@@ -55,6 +55,7 @@ def weights_table(run: FuseRun) -> pd.DataFrame:
     for key, trace in res.traces.items():
         for i, name in enumerate(ref.names):
             columns[f"{key}_{name}"] = trace[:, i]
+    columns.update(res.tick_traces)
     table: pd.DataFrame = pd.DataFrame(columns)
     return table
 

@@ -2,7 +2,8 @@
 contract tests both come from it, so a method is added by registering it here.
 
 Every fuser takes the heights of ``n`` sensors on one clock, shape (T, n) with NaN where a sensor
-is absent, plus keyword-only parameters, and returns a :class:`FusionResult`.
+is absent, plus keyword-only parameters, and returns a :class:`FusionResult`. A fuser that needs
+more from the log names it as a keyword in ``LOG_INPUTS``; the pipeline supplies it.
 """
 
 from __future__ import annotations
@@ -10,12 +11,21 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from altfuse.fuse.base import FusionResult
+from altfuse.fuse.complementary import fuse_multilayer
+from altfuse.fuse.delay import fuse_delay1, fuse_delay2
 from altfuse.fuse.mean import fuse_mean
 from altfuse.fuse.support import fuse_support
 
 FUSERS: dict[str, Callable[..., FusionResult]] = {
     "mean": fuse_mean,
     "support": fuse_support,
+    "delay1": fuse_delay1,
+    "delay2": fuse_delay2,
+    "multilayer": fuse_multilayer,
 }
 
-__all__ = ["FUSERS", "FusionResult"]
+#: Keyword arguments a fuser may take that come from the log, not from the user:
+#: the earth-frame vertical acceleration on the clock [m/s²] and the clock's tick [s].
+LOG_INPUTS = frozenset({"accel_up", "dt_s"})
+
+__all__ = ["FUSERS", "LOG_INPUTS", "FusionResult"]

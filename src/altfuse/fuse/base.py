@@ -14,6 +14,7 @@ FUSED = "fused"  # weighted as the method says
 EQUAL = "equal"  # the method's weights were all zero: equal weights over the valid sensors
 SINGLE = "single"  # one valid sensor: the result is that sensor
 NONE = "none"  # no valid sensor: the result is NaN
+INERTIAL = "inertial"  # no valid sensor, the accelerometer carried the estimate (multilayer)
 
 
 @dataclass(frozen=True)
@@ -28,10 +29,12 @@ class FusionResult:
         Weight of each sensor, shape (T, n), summing to 1 over the valid sensors at each tick,
         0 for a sensor that is not valid there, NaN on ticks with no valid sensor.
     status
-        Per tick: ``fused``, ``equal`` (the method's weights were all zero), ``single`` or
-        ``none``.
+        Per tick: ``fused``, ``equal`` (the method's weights were all zero), ``single``,
+        ``none``, or ``inertial`` (no sensor; the accelerometer carried the estimate).
     traces
-        Method-specific diagnostics, each of shape (T, n), e.g. Paper A's support ``r``.
+        Method-specific diagnostics per sensor, each of shape (T, n), e.g. Paper A's support.
+    tick_traces
+        Method-specific diagnostics per tick, each of shape (T,), e.g. Paper B's gate k(n).
     params
         The parameters used, with any value the method chose from the data.
     """
@@ -41,6 +44,7 @@ class FusionResult:
     weights: FloatArray
     status: npt.NDArray[np.str_]
     traces: dict[str, FloatArray] = field(default_factory=dict)
+    tick_traces: dict[str, FloatArray] = field(default_factory=dict)
     params: dict[str, float | int | str] = field(default_factory=dict)
 
 
@@ -50,6 +54,7 @@ def combine(
     method: str,
     traces: dict[str, FloatArray] | None = None,
     params: dict[str, float | int | str] | None = None,
+    tick_traces: dict[str, FloatArray] | None = None,
 ) -> FusionResult:
     """Normalise ``raw_weights`` over the valid sensors and form ``sum_i w_i z_i``.
 
@@ -76,5 +81,6 @@ def combine(
         weights=w,
         status=status,
         traces=traces or {},
+        tick_traces=tick_traces or {},
         params=params or {},
     )
