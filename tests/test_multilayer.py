@@ -52,6 +52,21 @@ def test_gate_reopens_after_a_long_shut_and_reacquires() -> None:
     assert never.x[-1] == 0.0  # the paper's gate alone stays shut for ever
 
 
+def test_coasts_on_the_accelerometer_for_two_seconds_then_stops_and_restarts() -> None:
+    z = np.concatenate([np.linspace(0.0, 5.0, 50), np.full(100, np.nan), np.full(20, 7.0)])
+    a = np.zeros(z.size)
+    cf = complementary_filter(z, a, dt=0.1, time_constant_s=1.0)
+    gap = slice(50, 150)
+    coast = np.isfinite(cf.x[gap])
+    assert coast.sum() == 20  # MAX_COAST_S = 2 s at 10 Hz
+    assert not coast[20:].any()
+    assert cf.x[150] == 7.0  # started again from layer 1
+    assert cf.v[150] == 0.0
+    # without the accelerometer there is nothing to coast on
+    no_imu = complementary_filter(z, np.full(z.size, np.nan), dt=0.1)
+    assert np.isnan(no_imu.x[gap]).all()
+
+
 def test_vertical_acceleration_from_specific_force_and_attitude() -> None:
     roll, pitch = np.radians(30.0), np.radians(-20.0)
     row = np.array([-np.sin(pitch), np.sin(roll) * np.cos(pitch), np.cos(roll) * np.cos(pitch)])

@@ -20,8 +20,12 @@ Departures, each because the paper's form fails on real logs:
   ``|e| <= e_max`` again (the filter re-acquires layer 1). The paper's gate, once the integration
   has drifted beyond ``e_max`` (an accelerometer bias, a long climb), would stay shut and
   integrate the drift for ever.
-- Where layer 1 has no value (no sensor), ``k = 0``: the filter integrates the accelerometer alone.
-  Where the accelerometer has no value (an IMU gap), ``a = 0``: the filter follows layer 1 alone.
+- Where layer 1 has no value (no sensor), ``k = 0``: the filter integrates the accelerometer alone,
+  for at most ``MAX_COAST_S`` seconds; after that, or at once where the accelerometer has no value
+  either, the output is NaN and the filter starts again (``x = z``, ``v = 0``) when layer 1
+  returns. Unbounded, a velocity error integrates into metres per second of gap (a log's
+  disarmed pause of 628 s put the output 64 m off). Where only the accelerometer has no value (an
+  IMU gap), ``a = 0``: the filter follows layer 1 alone.
 """
 
 from __future__ import annotations
@@ -44,6 +48,8 @@ DEFAULT_LAYER1_Q = 0.5
 DEFAULT_T_S = 1.0
 DEFAULT_E_MAX_M = 3.0
 DEFAULT_REOPEN_S = 2.0
+#: Longest stretch [s] the filter integrates the accelerometer with no layer-1 value.
+MAX_COAST_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -68,20 +74,28 @@ def complementary_filter(
     T = time_constant_s
     n = z.size
     x, v, e, k = (np.full(n, np.nan) for _ in range(4))
-    start = np.flatnonzero(np.isfinite(z))
-    if start.size == 0:
-        return Complementary(x, v, e, k)
-    s = int(start[0])
-    # x(0) = z(0), v(0) = 0
-    x_prev, v_prev = float(z[s]), 0.0
-    x[s], v[s], e[s], k[s] = x_prev, 0.0, 0.0, 1.0
-    shut_for = 0.0
-    reacquiring = False
     acc = np.where(np.isfinite(a), a, 0.0)
-    for i in range(s + 1, n):
+    x_prev = v_prev = math.nan  # not started
+    shut_for = 0.0
+    coasting, max_coast = 0, round(MAX_COAST_S / dt)  # in ticks
+    reacquiring = False
+    for i in range(n):
+        has_z = math.isfinite(z[i])
+        if math.isnan(x_prev):
+            if has_z:  # x(0) = z(0), v(0) = 0
+                x_prev, v_prev, coasting = float(z[i]), 0.0, 0
+                x[i], v[i], e[i], k[i] = x_prev, 0.0, 0.0, 1.0
+            continue
+        if not has_z:
+            coasting += 1
+            if coasting > max_coast or not math.isfinite(a[i]):
+                x_prev = v_prev = math.nan  # stop; start again when layer 1 returns
+                continue
+        else:
+            coasting = 0
         # e(n) = z(n) - x(n-1)
         e_i = z[i] - x_prev
-        if not math.isfinite(e_i):
+        if not has_z:
             k_i, e_i = 0.0, 0.0
         else:
             inside = abs(e_i) <= e_max_m
@@ -94,7 +108,7 @@ def complementary_filter(
         # x(n) = x(n-1) + (v(n) + k 2 e / T) dt
         x_prev = x_prev + (v_prev + k_i * 2.0 * e_i / T) * dt
         x[i], v[i], k[i] = x_prev, v_prev, k_i
-        e[i] = e_i if math.isfinite(z[i]) else np.nan
+        e[i] = e_i if has_z else np.nan
     return Complementary(x, v, e, k)
 
 
