@@ -122,6 +122,12 @@ def test_bad_files(tmp_path: Path, case: str, fragment: str) -> None:
         (["--window", "-2"], "--window"),
         (["--min-sensors", "0"], "--min-sensors"),
         (["--method", "mean", "--beta", "3"], "--beta does not apply"),
+        (["--method", "delay1", "--time-constant", "1"], "--time-constant does not apply"),
+        (["--method", "delay1", "--q", "-1"], "--q"),
+        (["--method", "delay2", "--form", "exact"], "'exact' is not one of"),
+        (["--method", "multilayer", "--time-constant", "0"], "--time-constant"),
+        (["--method", "multilayer", "--e-max", "-1"], "--e-max"),
+        (["--method", "multilayer", "--reopen", "-1"], "--reopen"),
     ],
 )
 def test_nonsense_parameters(tmp_path: Path, args: list[str], fragment: str) -> None:

@@ -117,6 +117,13 @@ def cli(verbose: int, quiet: bool, debug: bool) -> None:  # noqa: ARG001 (read i
 _LOG_ARG = click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
 
 
+def _method_option(
+    flag: str, kind: Any, help_text: str
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """A fusion-method parameter: passed on to the method only when given."""
+    return click.option(flag, type=kind, default=None, help=help_text)
+
+
 def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     return click.option(
         "-o",
@@ -161,55 +168,41 @@ def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..
     show_default=True,
     help="Clock over the union or the overlap of the sensors.",
 )
-@click.option(
-    "--alpha",
-    type=_AlphaType(),
-    default=None,
-    help="support: kernel scale [1/m^2], or 'auto' (from the data; default).",
+@_method_option(
+    "--alpha", _AlphaType(), "support: kernel scale [1/m^2], or 'auto' (from the data; default)."
 )
-@click.option(
-    "--beta",
-    type=float,
-    default=None,
-    help=f"support: penalty on the support's variance [default {DEFAULT_BETA:g}].",
+@_method_option(
+    "--beta", float, f"support: penalty on the support's variance [default {DEFAULT_BETA:g}]."
 )
-@click.option(
-    "--window",
-    type=int,
-    default=None,
-    help=f"support: k, previous ticks in the window [default {DEFAULT_WINDOW}].",
+@_method_option(
+    "--window", int, f"support: k, previous ticks in the window [default {DEFAULT_WINDOW}]."
 )
-@click.option(
+@_method_option(
     "--form",
-    type=click.Choice(FORMS),
-    default=None,
-    help="delay1/delay2/multilayer: temporal recursion, 'practical' (random walk, default) or "
+    click.Choice(FORMS),
+    "delay1/delay2/multilayer: temporal recursion, 'practical' (random walk, default) or "
     "'paper' (constant altitude).",
 )
-@click.option(
+@_method_option(
     "--q",
-    type=float,
-    default=None,
-    help="delay1/delay2/multilayer: process noise [m^2 per tick] "
+    float,
+    "delay1/delay2/multilayer: process noise [m^2 per tick] "
     f"[default {DEFAULT_Q:g}; multilayer {DEFAULT_LAYER1_Q:g}].",
 )
-@click.option(
+@_method_option(
     "--time-constant",
-    type=float,
-    default=None,
-    help=f"multilayer: complementary filter time constant T [s] [default {DEFAULT_T_S:g}].",
+    float,
+    f"multilayer: complementary filter time constant T [s] [default {DEFAULT_T_S:g}].",
 )
-@click.option(
+@_method_option(
     "--e-max",
-    type=float,
-    default=None,
-    help=f"multilayer: gate threshold on the correction [m] [default {DEFAULT_E_MAX_M:g}].",
+    float,
+    f"multilayer: gate threshold on the correction [m] [default {DEFAULT_E_MAX_M:g}].",
 )
-@click.option(
+@_method_option(
     "--reopen",
-    type=float,
-    default=None,
-    help=f"multilayer: seconds before a shut gate reopens [default {DEFAULT_REOPEN_S:g}].",
+    float,
+    f"multilayer: seconds before a shut gate reopens [default {DEFAULT_REOPEN_S:g}].",
 )
 @click.option(
     "--ground-window",
