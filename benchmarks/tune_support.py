@@ -5,7 +5,7 @@ Run on demand, not in the tests:  python benchmarks/tune_support.py [--shared ..
 Error measures, all RMSE [m] of the fused height:
 - ``paperA``: the synthetic Paper A experiment (tests/conftest.py), seeds 0-9, against its truth;
   over the whole flight and in the baro-departure regime.
-- ``sim``: sample_logs/sim_flight.bin against its SIM truth.
+- ``sim``: sample_logs/mission.bin against its SIM truth.
 - real logs with three or more sources (0038, 0039: GPS, BARO, CTUN.SAlt; diaven: GPS, GPS2,
   CTUN.BAlt, RFND) against the autopilot's own estimate (EKF -PD, or CTUN.Alt where the log has
   no EKF records), referred to take-off the same way. That estimate is a reference, not truth:
@@ -63,7 +63,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--shared", type=Path, default=ROOT.parent / "shared" / "logs")
     args = parser.parse_args()
-    cases = {"sim": referred_case(ROOT / "sample_logs" / "sim_flight.bin")}
+    cases = {"sim": referred_case(ROOT / "sample_logs" / "mission.bin")}
     for name in SHORT:
         path = args.shared / "ardupilot" / name
         if path.exists():

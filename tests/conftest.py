@@ -13,7 +13,7 @@ import pytest
 from altfuse.model import FloatArray
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE_LOG = ROOT / "sample_logs" / "sim_flight.bin"
+SAMPLE_LOG = ROOT / "sample_logs" / "mission.bin"
 SHARED_LOGS = Path(os.environ.get("ALTFUSE_SHARED_LOGS", ROOT.parent / "shared" / "logs"))
 
 

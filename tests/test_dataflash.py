@@ -80,7 +80,7 @@ def test_record_counts_match_pymavlink() -> None:
 
 
 def test_simulated_log_reads_back_what_was_written(tmp_path: Path) -> None:
-    sim = simulate_flight(seed=3, duration_s=60.0)
+    sim = simulate_flight("mission", seed=3, duration_s=60.0)
     path = tmp_path / "sim.bin"
     write_simulated_log(sim, path)
     flight = read_log(path)
@@ -89,8 +89,9 @@ def test_simulated_log_reads_back_what_was_written(tmp_path: Path) -> None:
     good = [(t, v[1]) for t, v in rfnd if v[2] == 4]
     # RFND.Dist is an int16 in centimetres with FMTU multiplier B: the reader gives metres
     np.testing.assert_allclose(sources["rangefinder"].value, [v / 100 for _, v in good], rtol=1e-12)
-    gps = [(t, v[2]) for t, v in sim.records["GPS"] if v[1] >= 3]
-    np.testing.assert_allclose(sources["gps"].value, [v for _, v in gps], rtol=1e-6)
+    # GPS.Alt is 'e' (int32 centimetres): written and read back to the centimetre
+    gps = [v[8] for _, v in sim.records["GPS"] if v[1] >= 3]
+    np.testing.assert_allclose(sources["gps"].value, gps, atol=0.005 + 1e-9)
     assert sources["gps"].dropped == {"GPS Status < 3 (no 3D fix)": 15}
     truth = {r.name: r for r in flight.references}["sim"]
     assert truth.t.size == 600

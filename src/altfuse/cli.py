@@ -20,6 +20,8 @@ import click
 
 from altfuse import __version__
 from altfuse.errors import AltfuseError, ParameterError
+from altfuse.evaluate import TRUTHS, Truth, choose_truth, evaluation_table
+from altfuse.evaluate import evaluate as evaluate_log
 from altfuse.fuse import FUSERS
 from altfuse.fuse.complementary import (
     DEFAULT_E_MAX_M,
@@ -31,8 +33,11 @@ from altfuse.fuse.delay import DEFAULT_Q, FORMS
 from altfuse.fuse.support import DEFAULT_BETA, DEFAULT_WINDOW
 from altfuse.info import describe
 from altfuse.io import read_log
-from altfuse.pipeline import FuseOptions, fuse_log
-from altfuse.write import default_meta_path, write_outputs
+from altfuse.metrics import ErrorStats
+from altfuse.pipeline import FuseOptions, FuseRun, fuse_log
+from altfuse.plot import check_plot_path, figure
+from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
+from altfuse.write import atomic_outputs, default_meta_path, write_outputs
 
 EXIT_BUG = 3
 #: Options that are parameters of a fusion method (passed on only when given).
@@ -115,6 +120,7 @@ def cli(verbose: int, quiet: bool, debug: bool) -> None:  # noqa: ARG001 (read i
 
 
 _LOG_ARG = click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
+_PATH = click.Path(dir_okay=False, path_type=Path)
 
 
 def _method_option(
@@ -125,12 +131,86 @@ def _method_option(
 
 
 def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    return click.option("-o", "--output", type=_PATH, required=True, help=help_text)
+
+
+def _pipeline_options(command: Callable[..., Any]) -> Callable[..., Any]:
+    """The options every fusion run shares: clock, datum and the sensors required."""
+    for option in reversed(
+        [
+            click.option(
+                "--rate",
+                "rate_hz",
+                type=float,
+                default=10.0,
+                show_default=True,
+                help="Rate of the common clock [Hz].",
+            ),
+            click.option(
+                "--max-gap",
+                "max_gap_s",
+                type=float,
+                default=1.0,
+                show_default=True,
+                help="Longest gap in a sensor's data the spline may bridge [s].",
+            ),
+            click.option(
+                "--span",
+                type=click.Choice(["union", "overlap"]),
+                default="union",
+                show_default=True,
+                help="Clock over the union or the overlap of the sensors.",
+            ),
+            click.option(
+                "--ground-window",
+                "ground_s",
+                type=float,
+                default=5.0,
+                show_default=True,
+                help="Seconds on the ground used to find each sensor's datum.",
+            ),
+            click.option(
+                "--takeoff-climb",
+                "climb_m",
+                type=float,
+                default=1.0,
+                show_default=True,
+                help="Rise [m] that marks take-off.",
+            ),
+            click.option(
+                "--min-sensors",
+                type=int,
+                default=2,
+                show_default=True,
+                help="Fail unless at least this many altitude sources are usable.",
+            ),
+        ]
+    ):
+        command = option(command)
+    return command
+
+
+def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
     return click.option(
-        "-o",
-        "--output",
-        type=click.Path(dir_okay=False, path_type=Path),
-        required=True,
-        help=help_text,
+        "--plot",
+        "plot_path",
+        type=_PATH,
+        help="Also draw the sensors, the fused altitude and the weights (.png or .svg).",
+    )(command)
+
+
+def _draw(run: FuseRun, path: Path, fused: dict[str, Any], truth: Truth | None) -> None:
+    figure(
+        path,
+        title=f"{Path(run.log.path).name}: {', '.join(fused)}",
+        t=run.referred.t,
+        names=run.referred.names,
+        heights=run.referred.h,
+        fused=fused,
+        weights=run.result.weights,
+        weights_of=f"{run.result.method}, the lowest RMSE" if len(fused) > 1 else run.result.method,
+        truth=None if truth is None else truth.h,
+        truth_label="truth" if truth is None else truth.label,
     )
 
 
@@ -145,29 +225,7 @@ def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..
     show_default=True,
     help="Fusion method.",
 )
-@click.option(
-    "--rate",
-    "rate_hz",
-    type=float,
-    default=10.0,
-    show_default=True,
-    help="Rate of the common clock [Hz].",
-)
-@click.option(
-    "--max-gap",
-    "max_gap_s",
-    type=float,
-    default=1.0,
-    show_default=True,
-    help="Longest gap in a sensor's data the spline may bridge [s].",
-)
-@click.option(
-    "--span",
-    type=click.Choice(["union", "overlap"]),
-    default="union",
-    show_default=True,
-    help="Clock over the union or the overlap of the sensors.",
-)
+@_pipeline_options
 @_method_option(
     "--alpha", _AlphaType(), "support: kernel scale [1/m^2], or 'auto' (from the data; default)."
 )
@@ -180,8 +238,8 @@ def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..
 @_method_option(
     "--form",
     click.Choice(FORMS),
-    "delay1/delay2/multilayer: temporal recursion, 'practical' (random walk, default) or "
-    "'paper' (constant altitude).",
+    "delay1/delay2/multilayer: temporal recursion, 'practical' (random walk, "
+    "default) or 'paper' (constant altitude).",
 )
 @_method_option(
     "--q",
@@ -205,46 +263,25 @@ def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..
     f"multilayer: seconds before a shut gate reopens [default {DEFAULT_REOPEN_S:g}].",
 )
 @click.option(
-    "--ground-window",
-    "ground_s",
-    type=float,
-    default=5.0,
-    show_default=True,
-    help="Seconds on the ground used to find each sensor's datum.",
-)
-@click.option(
-    "--takeoff-climb",
-    "climb_m",
-    type=float,
-    default=1.0,
-    show_default=True,
-    help="Rise [m] that marks take-off.",
-)
-@click.option(
-    "--min-sensors",
-    type=int,
-    default=2,
-    show_default=True,
-    help="Fail unless at least this many altitude sources are usable.",
-)
-@click.option(
     "--weights",
     "weights_path",
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Also write the weight traces (lambda, r, their window mean and variance).",
+    type=_PATH,
+    help="Also write the weight traces (the weights and each method's diagnostics).",
 )
 @click.option(
     "--meta",
     "meta_path",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=_PATH,
     help="Where to write the provenance JSON [default: beside the CSV].",
 )
+@_plot_option
 def fuse(
     log: Path,
     output: Path,
     method: str,
     weights_path: Path | None,
     meta_path: Path | None,
+    plot_path: Path | None,
     **options: Any,
 ) -> None:
     """Fuse the altitude sensors of LOG into one altitude, written to a CSV.
@@ -254,13 +291,15 @@ def fuse(
       altfuse fuse flight.bin -o flight.csv
       altfuse fuse flight.bin -o flight.csv --method mean --rate 20
       altfuse fuse flight.bin -o flight.csv --alpha 0.5 --beta 10 --weights w.csv
-      altfuse fuse flight.bin -o flight.csv --method multilayer --time-constant 2
+      altfuse fuse flight.bin -o flight.csv --method multilayer --plot flight.png
     """
     params = {k: options.pop(k) for k in METHOD_OPTIONS}
     params = {k: v for k, v in params.items() if v is not None}
     opts = FuseOptions(method=method, params=params, **options)
     opts.check()
-    targets = [output, weights_path, meta_path or default_meta_path(output)]
+    if plot_path is not None:
+        check_plot_path(plot_path)
+    targets = [output, weights_path, meta_path or default_meta_path(output), plot_path]
     for target in targets:
         if target is not None and log.exists() and target.resolve() == log.resolve():
             raise ParameterError(f"{target} is the input log; choose another output path")
@@ -274,6 +313,12 @@ def fuse(
             run.log.skipped_bytes,
         )
     outputs = write_outputs(run, output, weights_path, meta_path)
+    if plot_path is not None:
+        try:
+            truth: Truth | None = choose_truth(run.log, run.referred)
+        except AltfuseError:
+            truth = None
+        _draw(run, plot_path, {method: run.result.fused}, truth)
     counts = run.provenance["status_counts"]
     click.echo(
         f"{output}: {run.referred.t.size} rows, method {method}, "
@@ -281,6 +326,86 @@ def fuse(
         + ", ".join(f"{k} {v}" for k, v in counts.items())
         + f" (provenance: {outputs['meta']})"
     )
+
+
+def _stats_line(name: str, kind: str, s: ErrorStats) -> str:
+    return (
+        f"{name:<13}{kind:<9}{s.rmse:>9.3f}{s.mae:>9.3f}{s.max_abs:>9.3f}{s.bias:>+10.3f}{s.n:>7}"
+    )
+
+
+@cli.command()
+@_LOG_ARG
+@click.option(
+    "--truth",
+    type=click.Choice(TRUTHS),
+    default="auto",
+    show_default=True,
+    help="Measure against the simulator's SIM truth, or the EKF as a reference.",
+)
+@click.option(
+    "--methods", default=",".join(FUSERS), show_default=True, help="Comma-separated methods to run."
+)
+@click.option(
+    "--segments",
+    help="Also per segment: a length in seconds (30) or boundaries on the log's clock (50.5,62.3).",
+)
+@click.option("-o", "--output", "json_path", type=_PATH, help="Write the report as JSON.")
+@click.option("--csv", "csv_path", type=_PATH, help="Write the report as CSV.")
+@_pipeline_options
+@_plot_option
+def evaluate(
+    log: Path,
+    truth: str,
+    methods: str,
+    segments: str | None,
+    json_path: Path | None,
+    csv_path: Path | None,
+    plot_path: Path | None,
+    **options: Any,
+) -> None:
+    """Measure every method, every sensor and the onboard EKF against the truth in LOG.
+
+    The truth is the simulator's SIM altitude when the log has it; otherwise the autopilot's EKF
+    height stands in, labelled as a reference. Errors are in metres: RMSE, mean absolute error,
+    maximum absolute error and bias (mean of estimate - truth).
+
+    \b
+    Example:
+      altfuse evaluate sim.bin
+      altfuse evaluate flight.bin --methods support,mean --segments 30 -o report.json
+      altfuse evaluate flight.bin --plot flight.png --csv report.csv
+    """
+    if plot_path is not None:
+        check_plot_path(plot_path)
+    chosen = [m.strip() for m in methods.split(",") if m.strip()]
+    result = evaluate_log(log, chosen, FuseOptions(**options), truth, segments)
+    t = result.prepared.referred.t
+    click.echo(
+        f"{log.name}: measured against {result.truth.label}, {t.size} ticks "
+        f"({t[0]:.1f}-{t[-1]:.1f} s), errors in m"
+    )
+    header = f"{'name':<13}{'kind':<9}{'RMSE':>9}{'MAE':>9}{'max':>9}{'bias':>10}{'n':>7}"
+    click.echo(header)
+    for row in result.rows:
+        click.echo(_stats_line(row.name, row.kind, row.overall))
+    for label in result.segments:
+        click.echo(f"segment {label}:")
+        for row in result.rows:
+            click.echo(_stats_line(row.name, row.kind, row.segments[label]))
+    for method, why in result.failed.items():
+        click.echo(f"not run: {method}: {why}")
+    report = result.as_dict()
+    with atomic_outputs() as stage:
+        if json_path is not None:
+            stage(json_path, lambda f: json.dump(report, f, indent=2, allow_nan=False))
+        if csv_path is not None:
+            stage(csv_path, lambda f: evaluation_table(result).to_csv(f, index=False))
+    if plot_path is not None and result.runs:
+        scores = {r.name: r.overall.rmse for r in result.rows if r.kind == "method"}
+        best = min(result.runs, key=lambda m: scores[m] if math.isfinite(scores[m]) else math.inf)
+        fused = {m: r.result.fused for m, r in result.runs.items()}
+        _draw(result.runs[best], plot_path, fused, result.truth)
 
 
 @cli.command()
@@ -335,31 +460,46 @@ def info(log: Path, as_json: bool) -> None:
 
 
 @cli.command()
+@click.argument("scenario", type=click.Choice(list(SCENARIOS)))
 @_output_option("The DataFlash log to write.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 @click.option(
     "--duration",
     "duration_s",
     type=float,
-    default=120.0,
-    show_default=True,
-    help="Flight duration [s] (at least 60).",
+    default=None,
+    help="Flight duration [s] [default: the scenario's].",
 )
-def simulate(output: Path, seed: int, duration_s: float) -> None:
-    """Write a simulated flight as a DataFlash log, with the true altitude in SIM records.
+@click.option(
+    "--fault",
+    "faults",
+    type=click.Choice(FAULTS),
+    multiple=True,
+    help="Add a fault (repeatable).",
+)
+def simulate(
+    scenario: str, output: Path, seed: int, duration_s: float | None, faults: tuple[str, ...]
+) -> None:
+    """Write a simulated SCENARIO flight as a DataFlash log, with the truth in SIM records.
 
-    GPS (5 Hz, 0.2 s lag, AMSL), barometer (20 Hz, drifting), rangefinder (20 Hz, over uneven
-    ground, out of range above 20 m), IMU (50 Hz) and attitude (10 Hz).
+    \b
+    Scenarios:
+      paper-a  Paper A's experiment: level flight near 15 m, the barometer
+               departing, then every sensor scattering (75 s)
+      hover    Paper B's experiment: a climb to 240 m and a hover (180 s)
+      mission  take-off, climb, cruise over hills, landing (120 s)
+
+    GPS (5 Hz, 0.2 s lag, AMSL), barometer (20 Hz, drifting with temperature), rangefinder
+    (20 Hz, Stat and out-of-range codes), IMU (50 Hz, biased) and attitude (10 Hz).
 
     \b
     Example:
-      altfuse simulate -o sim.bin --seed 1 --duration 180
+      altfuse simulate mission -o mission.bin --seed 1 --duration 180
+      altfuse simulate hover -o hover.bin --fault gps-glitch --fault lose-baro
     """
-    from altfuse.simulate import simulate_flight, write_simulated_log
-
-    flight = simulate_flight(seed=seed, duration_s=duration_s)
+    flight = simulate_flight(scenario, seed=seed, duration_s=duration_s, faults=faults)
     n = write_simulated_log(flight, output)
-    click.echo(f"{output}: {n} records, {duration_s:g} s, seed {seed}")
+    click.echo(f"{output}: {scenario}, {n} records, {flight.duration_s:g} s, seed {seed}")
 
 
 def main() -> None:

@@ -79,8 +79,19 @@ def _require_sensors(
     )
 
 
-def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
-    """Fuse the altitude sources of an already-read log."""
+@dataclass(frozen=True)
+class Prepared:
+    """The method-independent stages of a run: sources tilt-corrected, aligned and referred."""
+
+    log: FlightLog
+    sensors: list[Series]
+    aligned: Aligned
+    referred: Referred
+    dropped: dict[str, str]
+
+
+def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
+    """Tilt-correct, align and refer the altitude sources of ``flight`` to take-off."""
     options.check()
     name = Path(flight.path).name
     if flight.vehicle == "sub":
@@ -96,6 +107,13 @@ def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
     referred = refer_to_takeoff(aligned, options.ground_s, options.climb_m)
     dropped.update(referred.dropped)
     _require_sensors(name, referred.names, options, dropped)
+    return Prepared(flight, sensors, aligned, referred, dropped)
+
+
+def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
+    """Fuse prepared sources with ``options.method`` and its parameters."""
+    options.check()
+    flight, referred = prepared.log, prepared.referred
     fuser = FUSERS[options.method]
     inputs: dict[str, Any] = {}
     wanted = _params(fuser)
@@ -104,12 +122,12 @@ def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
     if "dt_s" in wanted:
         inputs["dt_s"] = 1.0 / options.rate_hz
     result = fuser(referred.h, **inputs, **options.params)
-    record = provenance(flight, sensors, aligned, referred, result, dropped)
+    record = provenance(prepared, result)
     if "accel_up" in inputs:
         record["vertical_acceleration"] = accel_record
     return FuseRun(
         log=flight,
-        aligned=aligned,
+        aligned=prepared.aligned,
         referred=referred,
         result=result,
         options=options,
@@ -151,6 +169,11 @@ def _params(fuser: Any) -> set[str]:
     return set(inspect.signature(fuser).parameters)
 
 
+def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
+    """Fuse the altitude sources of an already-read log."""
+    return run_method(prepare(flight, options), options)
+
+
 def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
     """Read the log at ``path`` and fuse its altitude sources (the ``altfuse fuse`` job)."""
     options = options or FuseOptions()
@@ -158,15 +181,9 @@ def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
     return fuse_flight(read_log(path), options)
 
 
-def provenance(
-    flight: FlightLog,
-    sensors: list[Series],
-    aligned: Aligned,
-    referred: Referred,
-    result: FusionResult,
-    dropped: dict[str, str],
-) -> dict[str, Any]:
+def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
     """How the output was made: enough to reproduce it and to judge it."""
+    flight, aligned, referred = prepared.log, prepared.aligned, prepared.referred
     statuses, counts = np.unique(result.status, return_counts=True)
     return {
         "altfuse_version": __version__,
@@ -217,10 +234,10 @@ def provenance(
                 "samples_dropped": s.dropped,
                 "alignment": vars(aligned.stats[s.name]),
             }
-            for s in sensors
+            for s in prepared.sensors
             if s.name in referred.names
         ],
-        "sensors_dropped": dropped,
+        "sensors_dropped": prepared.dropped,
         "references": [
             {"name": r.name, "source": r.source, "datum": r.datum, "samples": int(r.t.size)}
             for r in flight.references

@@ -1,24 +1,31 @@
-"""A simulated flight with known true altitude, written as a genuine DataFlash log.
+"""Simulated flights with known true altitude, written as genuine DataFlash logs.
 
-The flight: ``GROUND_S`` seconds on the ground, a climb to ``CRUISE_M`` metres, a cruise at
-5 m/s over ground that rises and falls (so the rangefinder sees the terrain), a descent and
-``GROUND_S`` seconds on the ground after landing. The sensors, each with its own rate and error:
+A scenario gives the truth (height above take-off, distance flown, attitude) and how noisy each
+sensor is when; shared sensor models turn it into the records an ArduPilot log holds:
 
-- GPS, 5 Hz, AMSL (home at ``HOME_AMSL_M``), 0.2 s lag, 0.35 m white noise plus a slow
-  random walk; no fix (Status 1, altitude 12 m off) for its first 3 s.
-- Barometer, 20 Hz, 0.08 m noise, drifting 1 cm/s while the air warms (a common baro error).
-- Rangefinder, 20 Hz, distance along the body axis to the ground, 0.25 m mount height, 0.03 m
-  noise, Stat 4 (Good) from 0.2 to 20 m, Stat 3 (OutOfRangeHigh) with Dist = 20 m above that.
-- IMU, 50 Hz, specific force in FRD with a 0.05 m/s² bias on Z and 0.15 m/s² noise.
-- ATT, 10 Hz, small roll and pitch; SIM, 10 Hz, the true altitude AMSL as ArduPilot's simulator
-  logs it.
+- GPS, 5 Hz, altitude AMSL (home at ``HOME_AMSL_M``), 0.2 s lag, white noise plus a slow random
+  walk; no fix (Status 1, altitude 12 m off) for its first 3 s.
+- Barometer, 20 Hz, 0.08 m noise, drifting with its temperature (logged in ``BARO.Temp``): the
+  board warms from 25 °C towards 35 °C with a 60 s time constant, 0.12 m per °C.
+- Rangefinder, 20 Hz, distance along the body's down axis to the ground, 0.25 m mount height;
+  ``Stat`` 4 (Good) within range, 2 (OutOfRangeLow) below 0.2 m with ``Dist`` at 0.2 m, 3
+  (OutOfRangeHigh) above its maximum with ``Dist`` pinned at the maximum, as many drivers log.
+- IMU, 50 Hz, specific force in FRD with a 0.05 m/s² bias on Z and 0.15 m/s² noise; ATT, 10 Hz.
+- SIM, 10 Hz: the true altitude AMSL, as ArduPilot's simulator logs it.
+
+Scenarios (``SCENARIOS``): ``paper-a`` (Paper A's experiment: level flight near 15 m, the
+barometer departing, then every sensor scattering), ``hover`` (Paper B's hover at 240 m),
+``mission`` (take-off, climb, cruise over uneven ground, landing). Faults (``FAULTS``) can be
+added to any: ``baro-drift``, ``gps-glitch``, ``rangefinder-dropout``, ``lose-gps``,
+``lose-baro``, ``lose-rangefinder``.
 """
 
 from __future__ import annotations
 
 import os
 import tempfile
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -30,116 +37,326 @@ from altfuse.model import FloatArray
 
 G = 9.80665
 HOME_AMSL_M = 112.0
-CRUISE_M = 15.0
-GROUND_S = 10.0
-CLIMB_S = 15.0
-BOOT_S = 30.0  # the log's clock starts at boot; the flight data start this much later
-RANGEFINDER_MAX_M = 20.0
+HOME_LAT, HOME_LNG = -35.363261, 149.165230  # ArduPilot's simulator home
+GPS_WEEK, GPS_MS_OF_WEEK = 2400, 200_000_000
+BOOT_S = 30.0  # the log's clock starts at boot; the simulated flight starts this much later
+DT_S = 0.01  # truth clock
 RANGEFINDER_MIN_M = 0.2
 RANGEFINDER_MOUNT_M = 0.25
-MIN_DURATION_S = 60.0
+
+Records = dict[str, list[tuple[float, tuple[object, ...]]]]
 
 
 @dataclass(frozen=True)
-class SimulatedFlight:
-    """Truth on a 100 Hz clock and the records to log, by type, as (time [s], values) rows."""
+class Profile:
+    """The truth of one flight on the ``DT_S`` clock, and how noisy each sensor is when."""
 
-    seed: int
-    duration_s: float
     t: FloatArray
-    height_m: FloatArray
-    terrain_m: FloatArray
-    records: dict[str, list[tuple[float, tuple[object, ...]]]]
+    height_m: FloatArray  # above the take-off point
+    distance_m: FloatArray  # flown horizontally
+    roll: FloatArray  # [rad]
+    pitch: FloatArray  # [rad]
+    gps_sigma_m: FloatArray
+    baro_sigma_m: FloatArray
+    baro_error_m: FloatArray  # added to the barometer besides its thermal drift
+    rangefinder_sigma_m: FloatArray
+    rangefinder_max_m: float
+    terrain: Callable[[FloatArray], FloatArray]
+    segments: dict[str, tuple[float, float]] = field(default_factory=dict)  # flight time [s]
 
 
 def _smoothstep(x: FloatArray) -> FloatArray:
     x = np.clip(x, 0.0, 1.0)
-    return x * x * (3 - 2 * x)
+    return np.asarray(x * x * (3 - 2 * x))
 
 
-def true_height(t: FloatArray, duration_s: float) -> FloatArray:
-    """Height above the take-off point [m] at flight time ``t`` [s]."""
-    up = _smoothstep((t - GROUND_S) / CLIMB_S)
-    down = _smoothstep((t - (duration_s - GROUND_S - CLIMB_S)) / CLIMB_S)
-    wander = 1.5 * np.sin(2 * np.pi * t / 40.0) * up * (1 - down)
-    return np.asarray(CRUISE_M * up * (1 - down) + wander)
+def _flat(x: FloatArray) -> FloatArray:
+    return np.zeros_like(x)
 
 
-def terrain(x: FloatArray) -> FloatArray:
+def _hills(x: FloatArray) -> FloatArray:
     """Ground height [m] relative to the take-off point at horizontal distance ``x`` [m]."""
-    return np.asarray(2.0 * np.sin(2 * np.pi * x / 150.0) + 1.0 * np.sin(2 * np.pi * x / 37.0))
+    g = 2.0 * np.sin(2 * np.pi * x / 150.0) + 1.0 * np.sin(2 * np.pi * x / 37.0)
+    return np.asarray(g)
 
 
-def simulate_flight(seed: int = 0, duration_s: float = 120.0) -> SimulatedFlight:
-    """Simulate the flight and its sensors (see the module doc)."""
-    if not (np.isfinite(duration_s) and duration_s >= MIN_DURATION_S):
-        raise ParameterError(f"--duration must be at least {MIN_DURATION_S:g} s, got {duration_s}")
-    rng = np.random.default_rng(seed)
-    dt = 0.01
-    t = np.arange(0.0, duration_s, dt)
-    h = true_height(t, duration_s)
-    airborne = _smoothstep((t - GROUND_S - CLIMB_S / 2) / 2.0) * (
-        1 - _smoothstep((t - (duration_s - GROUND_S - CLIMB_S / 2)) / 2.0)
+def _airborne(t: FloatArray, up_s: float, down_s: float) -> FloatArray:
+    return np.asarray(_smoothstep((t - up_s) / 2.0) * (1 - _smoothstep((t - down_s) / 2.0)))
+
+
+def _level_profile(
+    t: FloatArray, ground_s: float, climb_s: float, top_m: float, land_at_s: float | None
+) -> FloatArray:
+    up = _smoothstep((t - ground_s) / climb_s)
+    down = 0.0 if land_at_s is None else _smoothstep((t - land_at_s) / climb_s)
+    return np.asarray(top_m * up * (1 - down))
+
+
+def mission(t: FloatArray, duration_s: float) -> Profile:
+    """Take-off, a climb to 15 m, a cruise at 5 m/s over hills, out and back, a descent and a
+    landing where it took off."""
+    ground, climb = 10.0, 15.0
+    land = duration_s - ground - climb
+    up = _smoothstep((t - ground) / climb) * (1 - _smoothstep((t - land) / climb))
+    h = _level_profile(t, ground, climb, 15.0, land) + 1.5 * np.sin(2 * np.pi * t / 40.0) * up
+    flying = _airborne(t, ground + climb / 2, land + climb / 2)
+    flown = np.cumsum(flying)
+    turn = t[np.searchsorted(flown, flown[-1] / 2)]  # half the way flown: turn back
+    ones = np.ones_like(t)
+    return Profile(
+        t=t,
+        height_m=h,
+        distance_m=np.cumsum(5.0 * flying * np.where(t < turn, 1.0, -1.0)) * DT_S,
+        roll=np.deg2rad(3.0) * np.sin(2 * np.pi * t / 7.0) * flying,
+        pitch=np.deg2rad(-5.0) * flying + np.deg2rad(1.0) * np.sin(2 * np.pi * t / 5.0),
+        gps_sigma_m=0.35 * ones,
+        baro_sigma_m=0.08 * ones,
+        baro_error_m=0.0 * ones,
+        rangefinder_sigma_m=0.03 * ones,
+        rangefinder_max_m=20.0,
+        terrain=_hills,
+        segments={
+            "ground": (0.0, ground),
+            "climb": (ground, ground + climb),
+            "cruise": (ground + climb, land),
+            "landing": (land, duration_s),
+        },
     )
-    x = np.cumsum(5.0 * airborne) * dt
-    ground = terrain(x) - terrain(np.zeros(1))[0]
-    roll = np.deg2rad(3.0) * np.sin(2 * np.pi * t / 7.0) * airborne
-    pitch = np.deg2rad(-5.0) * airborne + np.deg2rad(1.0) * np.sin(2 * np.pi * t / 5.0)
-    acc_up = np.gradient(np.gradient(h, dt), dt)
 
-    def at(rate_hz: float, lag_s: float = 0.0) -> tuple[FloatArray, FloatArray]:
-        ts = np.arange(0.0, duration_s, 1.0 / rate_hz)
-        return ts, np.interp(ts - lag_s, t, h)
 
-    records: dict[str, list[tuple[float, tuple[object, ...]]]] = {}
+#: Paper A's experiment: 40 s of level flight (400 samples at 10 Hz) starting at this flight time.
+PAPER_A_LEVEL_S = 20.0
 
-    def log(name: str, times: FloatArray, *columns: FloatArray | int) -> None:
-        cols = [np.broadcast_to(c, times.shape) for c in columns]
+
+def paper_a(t: FloatArray, duration_s: float) -> Profile:
+    """Paper A's experiment (ALGORITHMS.md section 2) as a flight over flat ground.
+
+    After take-off, 40 s of level flight near 15 m: samples 1-136 the sensors agree; 137-255 the
+    barometer departs (up to +2.5 m and back); 256-400 all scatter, the sonar least. Then landing.
+    """
+    start = PAPER_A_LEVEL_S
+    agree, departs, scatter = (
+        (start, start + 13.6),
+        (start + 13.6, start + 25.5),
+        (start + 25.5, start + 40.0),
+    )
+    h = _level_profile(t, 8.0, 10.0, 15.0, duration_s - 18.0)
+    h = h + 0.3 * np.sin(2 * np.pi * (t - start) / 16.0) * (h > 14.9)
+    in_dep = (t >= departs[0]) & (t < departs[1])
+    in_scatter = (t >= scatter[0]) & (t < scatter[1])
+    departure = np.where(in_dep, 2.5 * np.sin(np.pi * (t - departs[0]) / 11.9), 0.0)
+    return Profile(
+        t=t,
+        height_m=h,
+        distance_m=np.zeros_like(t),  # over flat ground the distance does not matter
+        roll=np.zeros_like(t),
+        pitch=np.deg2rad(-2.0) * _airborne(t, 13.0, duration_s - 13.0),
+        gps_sigma_m=np.where(in_scatter, 0.9, 0.25),
+        baro_sigma_m=np.where(in_scatter, 0.6, np.where(in_dep, 0.25, 0.1)),
+        baro_error_m=departure,
+        rangefinder_sigma_m=np.where(in_scatter, 0.15, 0.05),
+        rangefinder_max_m=20.0,
+        terrain=_flat,
+        segments={"agree": agree, "baro-departs": departs, "scatter": scatter},
+    )
+
+
+def hover(t: FloatArray, duration_s: float) -> Profile:
+    """Paper B's experiment: a climb to 240 m at 3 m/s and a hover there (position hold)."""
+    ground, climb = 10.0, 80.0
+    h = _level_profile(t, ground, climb, 240.0, None)
+    hovering = t >= ground + climb
+    h = h + np.where(hovering, 0.3 * np.sin(2 * np.pi * (t - ground - climb) / 20.0), 0.0)
+    flying = _airborne(t, ground, duration_s + 10.0)
+    ones = np.ones_like(t)
+    return Profile(
+        t=t,
+        height_m=h,
+        distance_m=np.zeros_like(t),
+        roll=np.deg2rad(1.0) * np.sin(2 * np.pi * t / 9.0) * flying,
+        pitch=np.deg2rad(1.0) * np.sin(2 * np.pi * t / 11.0) * flying,
+        gps_sigma_m=0.7 * ones,
+        baro_sigma_m=0.3 * ones,
+        baro_error_m=0.0 * ones,
+        rangefinder_sigma_m=0.05 * ones,
+        rangefinder_max_m=40.0,
+        terrain=_flat,
+        segments={
+            "ground": (0.0, ground),
+            "climb": (ground, ground + climb),
+            "hover": (ground + climb, duration_s),
+        },
+    )
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    make: Callable[[FloatArray, float], Profile]
+    default_duration_s: float
+    min_duration_s: float
+
+
+SCENARIOS: dict[str, Scenario] = {
+    s.name: s
+    for s in (
+        Scenario("paper-a", paper_a, 75.0, 75.0),
+        Scenario("hover", hover, 180.0, 120.0),
+        Scenario("mission", mission, 120.0, 60.0),
+    )
+}
+FAULTS = (
+    "baro-drift",
+    "gps-glitch",
+    "rangefinder-dropout",
+    "lose-gps",
+    "lose-baro",
+    "lose-rangefinder",
+)
+
+
+@dataclass(frozen=True)
+class SimulatedFlight:
+    """The truth on the ``DT_S`` clock and the records to log, by type."""
+
+    scenario: str
+    seed: int
+    duration_s: float
+    faults: tuple[str, ...]
+    profile: Profile
+    records: Records
+
+
+def _fault_window(duration_s: float, start: float, length_s: float) -> tuple[float, float]:
+    return start * duration_s, start * duration_s + length_s
+
+
+def simulate_flight(
+    scenario: str = "mission",
+    seed: int = 0,
+    duration_s: float | None = None,
+    faults: Sequence[str] = (),
+) -> SimulatedFlight:
+    """Simulate ``scenario`` and its sensors (see the module doc)."""
+    if scenario not in SCENARIOS:
+        raise ParameterError(f"unknown scenario {scenario!r}; choose one of {', '.join(SCENARIOS)}")
+    spec = SCENARIOS[scenario]
+    duration = spec.default_duration_s if duration_s is None else float(duration_s)
+    if not (np.isfinite(duration) and duration >= spec.min_duration_s):
+        raise ParameterError(
+            f"--duration must be at least {spec.min_duration_s:g} s for {scenario}, got {duration}"
+        )
+    unknown = [f for f in faults if f not in FAULTS]
+    if unknown:
+        raise ParameterError(f"unknown fault {unknown[0]!r}; choose from {', '.join(FAULTS)}")
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration, DT_S)
+    p = spec.make(t, duration)
+    records: Records = {}
+
+    def at(rate_hz: float) -> FloatArray:
+        return np.arange(0.0, duration, 1.0 / rate_hz)
+
+    def truth(ts: FloatArray, values: FloatArray, lag_s: float = 0.0) -> FloatArray:
+        return np.interp(ts - lag_s, t, values)
+
+    def log(name: str, times: FloatArray, *columns: FloatArray | float) -> None:
+        cols = [np.broadcast_to(np.asarray(c), times.shape) for c in columns]
         records[name] = [(float(ti), tuple(c[k] for c in cols)) for k, ti in enumerate(times)]
 
-    ts, hg = at(5.0, lag_s=0.2)
-    walk = np.cumsum(rng.normal(0.0, 0.05, ts.size))
+    def keep(name: str, times: FloatArray) -> FloatArray:
+        return times[times < 0.5 * duration] if f"lose-{name}" in faults else times
+
+    # GPS: 5 Hz, 0.2 s lag, AMSL, white noise + random walk, no fix for the first 3 s
+    ts = keep("gps", at(5.0))
     fix = ts >= 3.0
-    gps_alt = HOME_AMSL_M + hg + walk + rng.normal(0.0, 0.35, ts.size) + np.where(fix, 0.0, 12.0)
-    log("GPS", ts, 0, np.where(fix, 3, 1), gps_alt)
+    alt = HOME_AMSL_M + truth(ts, p.height_m, lag_s=0.2)
+    alt = (
+        alt
+        + np.cumsum(rng.normal(0.0, 0.05, ts.size))
+        + truth(ts, p.gps_sigma_m) * rng.normal(0.0, 1.0, ts.size)
+    )
+    alt = alt + np.where(fix, 0.0, 12.0)
+    if "gps-glitch" in faults:
+        lo, hi = _fault_window(duration, 0.6, 5.0)
+        alt = alt + np.where((ts >= lo) & (ts < hi), 15.0, 0.0)
+    # GPS time (week and ms of week) once fixed, 0 before, as receivers report it
+    gms = np.where(fix, GPS_MS_OF_WEEK + np.round((BOOT_S + ts) * 1000), 0)
+    climb = np.gradient(p.height_m, DT_S)
+    log(
+        "GPS",
+        ts,
+        0,
+        np.where(fix, 3, 1),
+        gms,
+        np.where(fix, GPS_WEEK, 0),
+        np.where(fix, 14, 4),
+        np.where(fix, 0.8, 9.99),
+        HOME_LAT,
+        HOME_LNG,
+        alt,
+        truth(ts, np.abs(np.gradient(p.distance_m, DT_S))),
+        0.0,
+        -truth(ts, climb),
+        0.0,
+        1,
+    )
 
-    ts, hb = at(20.0)
-    drift = 0.01 * np.clip(ts - GROUND_S, 0.0, None)
-    log("BARO", ts, 0, hb + drift + rng.normal(0.0, 0.08, ts.size), 1)
+    # barometer: 20 Hz, thermal drift, scenario error, noise
+    ts = keep("baro", at(20.0))
+    temp = 25.0 + 10.0 * (1 - np.exp(-ts / 60.0))
+    alt = truth(ts, p.height_m) + 0.12 * (temp - 25.0) + truth(ts, p.baro_error_m)
+    alt = alt + truth(ts, p.baro_sigma_m) * rng.normal(0.0, 1.0, ts.size)
+    if "baro-drift" in faults:
+        alt = alt + 0.05 * np.clip(ts - 0.4 * duration, 0.0, None)
+    log("BARO", ts, 0, alt, temp, 1)
 
-    ts, hr = at(20.0)
-    tilt = np.cos(np.interp(ts, t, roll)) * np.cos(np.interp(ts, t, pitch))
-    dist = (hr - np.interp(ts, t, ground) + RANGEFINDER_MOUNT_M) / tilt
-    dist = dist + rng.normal(0.0, 0.03, ts.size)
-    stat = np.where(dist > RANGEFINDER_MAX_M, 3, np.where(dist < RANGEFINDER_MIN_M, 2, 4))
+    # rangefinder: 20 Hz along the body axis, out-of-range codes as drivers log them
+    ts = keep("rangefinder", at(20.0))
+    ground = p.terrain(truth(ts, p.distance_m))
+    tilt = np.cos(truth(ts, p.roll)) * np.cos(truth(ts, p.pitch))
+    dist = (truth(ts, p.height_m) - ground + RANGEFINDER_MOUNT_M) / tilt
+    dist = dist + truth(ts, p.rangefinder_sigma_m) * rng.normal(0.0, 1.0, ts.size)
+    stat = np.where(dist > p.rangefinder_max_m, 3, np.where(dist < RANGEFINDER_MIN_M, 2, 4))
+    dist = np.clip(dist, RANGEFINDER_MIN_M, p.rangefinder_max_m)
+    if "rangefinder-dropout" in faults:
+        lo, hi = _fault_window(duration, 0.5, 10.0)
+        out = (ts >= lo) & (ts < hi)
+        stat, dist = np.where(out, 1, stat), np.where(out, 0.0, dist)  # 1 = NoData
     # logged as newer ArduPilot does: centimetres in an int16, multiplier B (0.01) in FMTU
-    dist_cm = np.round(100 * np.clip(dist, RANGEFINDER_MIN_M, RANGEFINDER_MAX_M))
-    log("RFND", ts, 0, dist_cm, stat, 25)
+    log("RFND", ts, 0, np.round(100 * dist), stat, 25)
 
-    ts = np.arange(0.0, duration_s, 1.0 / 50.0)
-    r, p, a = (np.interp(ts, t, v) for v in (roll, pitch, acc_up))
-    f_ned = np.stack([np.zeros_like(ts), np.zeros_like(ts), -(G + a)])
-    # specific force in the body frame: R_ned_to_body @ f_ned, yaw 0
+    # IMU: 50 Hz specific force in FRD, with bias and noise
+    ts = at(50.0)
+    r, pitch = truth(ts, p.roll), truth(ts, p.pitch)
+    acc_up = np.gradient(np.gradient(p.height_m, DT_S), DT_S)
+    f_down = -(G + truth(ts, acc_up))
+    # f_body = R_ned_to_body @ (0, 0, f_down), yaw 0
     f_body = np.stack(
         [
-            -np.sin(p) * f_ned[2],
-            np.sin(r) * np.cos(p) * f_ned[2],
-            np.cos(r) * np.cos(p) * f_ned[2],
+            -np.sin(pitch) * f_down,
+            np.sin(r) * np.cos(pitch) * f_down,
+            np.cos(r) * np.cos(pitch) * f_down,
         ]
     )
-    noise = rng.normal(0.0, 0.15, (3, ts.size))
-    log("IMU", ts, 0, *(f_body + noise + np.array([[0.0], [0.0], [0.05]])))
+    f_body = f_body + rng.normal(0.0, 0.15, (3, ts.size)) + np.array([[0.0], [0.0], [0.05]])
+    log("IMU", ts, 0, *f_body)
 
-    ts = np.arange(0.0, duration_s, 0.1)
-    log("ATT", ts, *(np.rad2deg(np.interp(ts, t, v)) for v in (roll, pitch)), 0)
-    log("SIM", ts, HOME_AMSL_M + np.interp(ts, t, h))
-    return SimulatedFlight(seed, float(duration_s), t, h, ground, records)
+    ts = at(10.0)
+    log("ATT", ts, np.rad2deg(truth(ts, p.roll)), np.rad2deg(truth(ts, p.pitch)), 0.0)
+    log("SIM", ts, HOME_AMSL_M + truth(ts, p.height_m))
+    return SimulatedFlight(scenario, seed, duration, tuple(faults), p, records)
 
 
 _TYPES = {
     # name: (format, columns, units, multipliers), ArduPilot 4.x layouts (subsets)
-    "GPS": ("QBBf", "TimeUS,I,Status,Alt", "s#-m", "F--0"),
-    "BARO": ("QBfB", "TimeUS,I,Alt,Health", "s#m-", "F-0-"),
+    "GPS": (
+        "QBBIHBcLLeffffB",
+        "TimeUS,I,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,Yaw,U",
+        "s#-s-S-DUmnhnh-",
+        "F--C--BGGB000--",
+    ),
+    "BARO": ("QBffB", "TimeUS,I,Alt,Temp,Health", "s#mO-", "F-00-"),
     "RFND": ("QBhBB", "TimeUS,Instance,Dist,Stat,Orient", "s#m--", "F-B--"),
     "IMU": ("QBfff", "TimeUS,I,AccX,AccY,AccZ", "s#ooo", "F-000"),
     "ATT": ("Qfff", "TimeUS,Roll,Pitch,Yaw", "sddh", "F000"),
@@ -162,8 +379,12 @@ def write_simulated_log(flight: SimulatedFlight, path: str | Path) -> int:
             writer = DataFlashWriter(handle)
             for name, (fmt, columns, units, mults) in _TYPES.items():
                 writer.define(name, fmt, columns, units, mults)
-            message = f"ArduCopter V4.0.0 (simulated by altfuse {__version__}, seed {flight.seed})"
-            writer.write("MSG", int(BOOT_S * 1e6), message)
+            faults = ", faults " + "+".join(flight.faults) if flight.faults else ""
+            message = (
+                f"ArduCopter V4.0.0 (simulated by altfuse {__version__}: {flight.scenario}, "
+                f"seed {flight.seed}{faults})"
+            )
+            writer.write("MSG", int(BOOT_S * 1e6), message[:64])
             for time_s, name, values in rows:
                 writer.write(name, round(time_s * 1e6), *values)
         os.replace(tmp, path)

@@ -13,6 +13,9 @@ others. With deviations from the running mean ``x = z - mu`` (the paper's ``mu``
     R_pq(k) = (k-1)/k R_pq(k-1) + x_p(k) x_q(k) / k
     delta2_p(k) = R_pp(k) - mean_{q != p} R_pq(k)           (floored at VARIANCE_FLOOR_M2)
 
+where the mean runs over the sensors ``q`` valid at ``k`` (decided here: a sensor that has gone
+out of range would otherwise bring a covariance from another part of the flight).
+
 Temporal fusion per sensor: one-step delay (3.2, the paper's baseline from radar processing)::
 
     Z+(1) = Z(1),   P+(1) = delta2(1)
@@ -98,7 +101,8 @@ def measurement_variances(z: FloatArray) -> FloatArray:
         return np.where(count > 0, np.maximum(r_pp, VARIANCE_FLOOR_M2), np.nan)
     cross = np.zeros_like(z)
     for p in range(n):
-        others = []
+        total = np.zeros(z.shape[0])
+        others = np.zeros(z.shape[0])
         for q in range(n):
             if q == p:
                 continue
@@ -106,12 +110,11 @@ def measurement_variances(z: FloatArray) -> FloatArray:
             # R_pq(k) = (k-1)/k R_pq(k-1) + x_p(k) x_q(k) / k over the ticks both are valid
             with np.errstate(invalid="ignore", divide="ignore"):
                 r_pq = np.cumsum(np.where(both, x[:, p] * x[:, q], 0.0)) / np.cumsum(both)
-            others.append(np.where(np.cumsum(both) > 0, r_pq, np.nan))
-        # R_p(k): the mean over the other sensors (more than two sensors)
-        with np.errstate(invalid="ignore"):
-            stacked = np.column_stack(others)
-            has = np.isfinite(stacked).any(axis=1)
-            cross[:, p] = np.where(has, np.nanmean(np.where(has[:, None], stacked, 0.0), axis=1), 0)
+            total += np.where(both, r_pq, 0.0)
+            others += both
+        # R_p(k): the mean over the other sensors valid at k
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cross[:, p] = np.where(others > 0, total / others, 0.0)
     delta2 = np.maximum(r_pp - cross, VARIANCE_FLOOR_M2)
     return np.where(count > 0, delta2, np.nan)
 

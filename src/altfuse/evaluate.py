@@ -1,0 +1,205 @@
+"""Measuring every method, every single sensor and the onboard EKF against the truth.
+
+The truth is the simulator's ``SIM.Alt`` when the log has it. Otherwise the autopilot's own EKF
+height (``XKF1``/``NKF1``) stands in, labelled as a *reference*: it is itself an estimate, and a
+method can be right where it differs. Either is referred to the take-off point exactly as the
+sensors are (its median over the same ground window is removed), so that a constant datum
+difference is not counted as error.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from altfuse.datum import Referred
+from altfuse.errors import AltfuseError, NoUsableSensorsError, ParameterError
+from altfuse.fuse import FUSERS
+from altfuse.io import read_log
+from altfuse.metrics import ErrorStats, error_stats
+from altfuse.model import FlightLog, FloatArray, Series
+from altfuse.pipeline import FuseOptions, FuseRun, Prepared, prepare, run_method
+
+TRUTHS = ("auto", "sim", "ekf")
+
+
+@dataclass(frozen=True)
+class Truth:
+    """The series every estimate is measured against, on the clock and referred to take-off."""
+
+    name: str  # "sim" or "ekf"
+    is_reference: bool  # True: an estimate standing in for the truth
+    source: str
+    h: FloatArray
+
+    @property
+    def label(self) -> str:
+        what = "reference (the autopilot's estimate, not truth)" if self.is_reference else "truth"
+        return f"{self.source} as {what}"
+
+
+@dataclass(frozen=True)
+class Row:
+    """One estimate's errors, overall and per segment."""
+
+    name: str
+    kind: str  # "method", "sensor" or "onboard"
+    estimate: FloatArray
+    overall: ErrorStats
+    segments: dict[str, ErrorStats] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    prepared: Prepared
+    truth: Truth
+    rows: tuple[Row, ...]
+    runs: dict[str, FuseRun]
+    failed: dict[str, str]
+    segments: dict[str, tuple[float, float]]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "log": Path(self.prepared.log.path).name,
+            "sha256": self.prepared.log.sha256,
+            "truth": {
+                "name": self.truth.name,
+                "source": self.truth.source,
+                "is_reference": self.truth.is_reference,
+                "label": self.truth.label,
+            },
+            "segments": {k: list(v) for k, v in self.segments.items()},
+            "rows": [
+                {
+                    "name": r.name,
+                    "kind": r.kind,
+                    "overall": r.overall.as_dict(),
+                    "segments": {k: s.as_dict() for k, s in r.segments.items()},
+                }
+                for r in self.rows
+            ],
+            "failed": self.failed,
+        }
+
+
+def _on_clock(series: Series, referred: Referred) -> FloatArray:
+    """``series`` on the clock (linear, no extrapolation), referred over the ground window."""
+    t = referred.t
+    inside = (t >= series.t[0]) & (t <= series.t[-1])
+    order = np.argsort(series.t, kind="stable")
+    h = np.where(inside, np.interp(t, series.t[order], series.value[order]), np.nan)
+    lo, hi = referred.ground_window_s
+    ground = (t >= lo) & (t <= hi) & np.isfinite(h)
+    if not ground.any():
+        ground = np.isfinite(h)
+    if not ground.any():
+        return h
+    return np.asarray(h - np.median(h[ground]))
+
+
+def choose_truth(flight: FlightLog, referred: Referred, which: str = "auto") -> Truth:
+    """The simulator's truth, else the EKF as a reference (``which``: auto, sim or ekf)."""
+    if which not in TRUTHS:
+        raise ParameterError(f"--truth must be one of {', '.join(TRUTHS)}, got {which!r}")
+    refs = {r.name: r for r in flight.references}
+    name = Path(flight.path).name
+    for candidate in ("sim", "ekf"):
+        if which in ("auto", candidate) and candidate in refs:
+            series = refs[candidate]
+            return Truth(candidate, candidate == "ekf", series.source, _on_clock(series, referred))
+    wanted = {"auto": "SIM or XKF1/NKF1", "sim": "SIM", "ekf": "XKF1/NKF1"}[which]
+    raise NoUsableSensorsError(f"{name}: no {wanted} records to measure against")
+
+
+def parse_segments(spec: str | None, t: FloatArray) -> dict[str, tuple[float, float]]:
+    """Segments of the clock from ``spec``: a length in seconds (``30``) for equal windows, or
+    boundaries on the log's clock (``50.5,62.3``)."""
+    if not spec:
+        return {}
+    try:
+        values = [float(v) for v in spec.split(",") if v.strip()]
+    except ValueError as exc:
+        raise ParameterError(f"--segments takes seconds or boundaries, got {spec!r}") from exc
+    start, end = float(t[0]), float(t[-1])
+    if len(values) == 1 and "," not in spec:
+        if not values[0] > 0:
+            raise ParameterError(f"--segments length must be positive, got {values[0]}")
+        edges = [*np.arange(start, end, values[0]).tolist(), end]
+    else:
+        edges = [start, *sorted(v for v in values if start < v < end), end]
+    return {
+        f"{a:.1f}-{b:.1f}s": (float(a), float(b)) for a, b in itertools.pairwise(edges) if b > a
+    }
+
+
+def _row(
+    name: str,
+    kind: str,
+    estimate: FloatArray,
+    truth: FloatArray,
+    t: FloatArray,
+    segments: dict[str, tuple[float, float]],
+) -> Row:
+    per_segment = {
+        label: error_stats(estimate, truth, (t >= a) & (t < b if b < t[-1] else t <= b))
+        for label, (a, b) in segments.items()
+    }
+    return Row(name, kind, estimate, error_stats(estimate, truth), per_segment)
+
+
+def evaluate(
+    path: str | Path,
+    methods: Sequence[str] | None = None,
+    options: FuseOptions | None = None,
+    truth: str = "auto",
+    segments: str | None = None,
+) -> Evaluation:
+    """Run every method on the log at ``path`` and measure it, each sensor and the EKF.
+
+    A method that cannot run on the log (``multilayer`` without IMU) is listed in ``failed``.
+    """
+    options = options or FuseOptions()
+    methods = list(methods or FUSERS)
+    unknown = [m for m in methods if m not in FUSERS]
+    if unknown:
+        raise ParameterError(f"unknown method {unknown[0]!r}; choose from {', '.join(FUSERS)}")
+    options.check()
+    prepared = prepare(read_log(path), options)
+    reference = choose_truth(prepared.log, prepared.referred, truth)
+    t = prepared.referred.t
+    spans = parse_segments(segments, t)
+    rows, runs, failed = [], {}, {}
+    for method in methods:
+        try:
+            run = run_method(prepared, replace(options, method=method, params={}))
+        except AltfuseError as exc:
+            failed[method] = str(exc)
+            continue
+        runs[method] = run
+        rows.append(_row(method, "method", run.result.fused, reference.h, t, spans))
+    for i, name in enumerate(prepared.referred.names):
+        rows.append(_row(name, "sensor", prepared.referred.h[:, i], reference.h, t, spans))
+    ekf = next((r for r in prepared.log.references if r.name == "ekf"), None)
+    if ekf is not None and reference.name != "ekf":
+        rows.append(
+            _row("ekf", "onboard", _on_clock(ekf, prepared.referred), reference.h, t, spans)
+        )
+    return Evaluation(prepared, reference, tuple(rows), runs, failed, spans)
+
+
+def evaluation_table(result: Evaluation) -> pd.DataFrame:
+    """One row per estimate and segment (``all`` for the whole flight), for scripts."""
+    records = []
+    for row in result.rows:
+        for segment, stats in {"all": row.overall, **row.segments}.items():
+            records.append(
+                {"name": row.name, "kind": row.kind, "segment": segment, **stats.as_dict()}
+            )
+    table: pd.DataFrame = pd.DataFrame.from_records(records)
+    return table

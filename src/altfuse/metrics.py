@@ -1,0 +1,47 @@
+"""Error measures, used by ``altfuse evaluate`` and by the tests."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from altfuse.model import FloatArray
+
+
+@dataclass(frozen=True)
+class ErrorStats:
+    """Errors of an estimate against a truth or reference [m], over the ticks where both exist.
+
+    ``bias`` is the mean of ``estimate - truth``: positive when the estimate reads high.
+    """
+
+    n: int
+    rmse: float
+    mae: float
+    max_abs: float
+    bias: float
+
+    def as_dict(self) -> dict[str, float | int | None]:
+        """The fields, with NaN (no common tick) as None so that the JSON stays strict."""
+        return {k: (None if v != v else v) for k, v in asdict(self).items()}
+
+
+def error_stats(
+    estimate: FloatArray, truth: FloatArray, mask: npt.NDArray[np.bool_] | None = None
+) -> ErrorStats:
+    """RMSE, mean absolute error, maximum absolute error and bias of ``estimate`` [m]."""
+    both = np.isfinite(estimate) & np.isfinite(truth)
+    if mask is not None:
+        both &= mask
+    e = estimate[both] - truth[both]
+    if e.size == 0:
+        return ErrorStats(0, np.nan, np.nan, np.nan, np.nan)
+    return ErrorStats(
+        n=int(e.size),
+        rmse=float(np.sqrt(np.mean(e**2))),
+        mae=float(np.mean(np.abs(e))),
+        max_abs=float(np.max(np.abs(e))),
+        bias=float(np.mean(e)),
+    )

@@ -1,0 +1,88 @@
+"""Figures of a fusion run or an evaluation: the panels of Paper A's figures 3-5.
+
+1. the aligned sensors, referred to the take-off point;
+2. the fused altitude over the sensors, with the truth or the reference when known;
+3. the weight each sensor received over time.
+
+The format follows the file's extension (PNG or SVG); the figure is written atomically. Figures are
+made with matplotlib's object API, without pyplot: no backend, window or global state.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+
+from matplotlib.figure import Figure
+
+from altfuse.errors import ParameterError
+from altfuse.model import FloatArray
+
+FORMATS = (".png", ".svg")
+_SENSOR_COLOURS = {"gps": "tab:blue", "baro": "tab:orange", "rangefinder": "tab:green"}
+
+
+def check_plot_path(path: str | Path) -> Path:
+    path = Path(path)
+    if path.suffix.lower() not in FORMATS:
+        raise ParameterError(f"--plot must end in {' or '.join(FORMATS)}, got {path.name}")
+    return path
+
+
+def _colour(name: str) -> str | None:
+    for kind, colour in _SENSOR_COLOURS.items():
+        if name == kind:
+            return colour
+    return None
+
+
+def figure(
+    path: str | Path,
+    *,
+    title: str,
+    t: FloatArray,
+    names: tuple[str, ...],
+    heights: FloatArray,
+    fused: Mapping[str, FloatArray],
+    weights: FloatArray,
+    weights_of: str,
+    truth: FloatArray | None = None,
+    truth_label: str = "truth",
+) -> Path:
+    """Draw the three panels and write them to ``path`` (PNG or SVG)."""
+    path = check_plot_path(path)
+    fig = Figure(figsize=(13, 9), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [3, 3, 2]})
+    ax_sensors, ax_fused, ax_weights = axes
+    for i, name in enumerate(names):
+        ax_sensors.plot(t, heights[:, i], lw=0.8, color=_colour(name), label=name)
+        ax_fused.plot(t, heights[:, i], lw=0.5, alpha=0.3, color=_colour(name), label=name)
+        ax_weights.plot(t, weights[:, i], lw=0.8, color=_colour(name), label=name)
+    ax_sensors.set_title("aligned sensors")
+    for method, values in fused.items():
+        ax_fused.plot(t, values, lw=1.3, label=f"fused: {method}")
+    if truth is not None:
+        ax_fused.plot(t, truth, "k--", lw=1.0, label=truth_label)
+    ax_fused.set_title("fused altitude over the sensors")
+    ax_weights.set_title(f"weights ({weights_of})")
+    ax_weights.set_ylim(-0.02, 1.02)
+    ax_sensors.set_ylabel("height above take-off [m]")
+    ax_fused.set_ylabel("height above take-off [m]")
+    ax_weights.set_ylabel("weight [-]")
+    ax_weights.set_xlabel("time since boot [s]")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=8, frameon=False)
+    fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=110)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
