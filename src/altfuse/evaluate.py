@@ -1,10 +1,10 @@
 """Measuring every method, every single sensor and the onboard EKF against the truth.
 
 The truth is the simulator's ``SIM.Alt`` when the log has it. Otherwise the autopilot's own EKF
-height (``XKF1``/``NKF1``) stands in, labelled as a *reference*: it is itself an estimate, and a
-method can be right where it differs. Either is referred to the take-off point exactly as the
-sensors are (its median over the same ground window is removed), so that a constant datum
-difference is not counted as error.
+height (``XKF1``/``NKF1``, else ``CTUN.Alt``, the EKF's altitude above home) stands in, labelled
+as a *reference*: it is itself an estimate, and a method can be right where it differs. Either is
+referred to the take-off point exactly as the sensors are (its median over the same ground window
+is removed), so that a constant datum difference is not counted as error.
 """
 
 from __future__ import annotations
@@ -109,11 +109,13 @@ def choose_truth(flight: FlightLog, referred: Referred, which: str = "auto") -> 
         raise ParameterError(f"--truth must be one of {', '.join(TRUTHS)}, got {which!r}")
     refs = {r.name: r for r in flight.references}
     name = Path(flight.path).name
-    for candidate in ("sim", "ekf"):
-        if which in ("auto", candidate) and candidate in refs:
+    for candidate, kind in (("sim", "sim"), ("ekf", "ekf"), ("ctun", "ekf")):
+        if which in ("auto", kind) and candidate in refs:
             series = refs[candidate]
-            return Truth(candidate, candidate == "ekf", series.source, _on_clock(series, referred))
-    wanted = {"auto": "SIM or XKF1/NKF1", "sim": "SIM", "ekf": "XKF1/NKF1"}[which]
+            return Truth(kind, kind == "ekf", series.source, _on_clock(series, referred))
+    wanted = {"auto": "SIM, XKF1/NKF1 or CTUN.Alt", "sim": "SIM", "ekf": "XKF1/NKF1 or CTUN.Alt"}[
+        which
+    ]
     raise NoUsableSensorsError(f"{name}: no {wanted} records to measure against")
 
 

@@ -1,0 +1,132 @@
+"""altfuse evaluate, the error measures and the figures."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from altfuse.cli import cli
+from altfuse.errors import ParameterError
+from altfuse.evaluate import evaluate, parse_segments
+from altfuse.metrics import error_stats
+from altfuse.simulate import BOOT_S, simulate_flight
+from conftest import ROOT, shared_log
+
+PAPER_A = ROOT / "sample_logs" / "paper_a.bin"
+
+
+def test_error_stats_hand_computed() -> None:
+    estimate = np.array([1.0, 2.0, np.nan, 4.0])
+    truth = np.array([0.0, 2.5, 3.0, 4.0])
+    s = error_stats(estimate, truth)
+    # errors +1, -0.5, 0 over three common ticks
+    assert s.n == 3
+    assert s.rmse == pytest.approx(np.sqrt(1.25 / 3))
+    assert s.mae == pytest.approx(0.5)
+    assert s.max_abs == 1.0
+    assert s.bias == pytest.approx(0.5 / 3)
+    assert error_stats(estimate, truth, np.zeros(4, dtype=bool)).as_dict()["rmse"] is None
+
+
+def test_segments_by_length_and_by_boundaries() -> None:
+    t = np.arange(0, 101) / 1.0  # 0..100 s
+    assert list(parse_segments("40", t).values()) == [(0.0, 40.0), (40.0, 80.0), (80.0, 100.0)]
+    assert list(parse_segments("30,70", t).values()) == [(0.0, 30.0), (30.0, 70.0), (70.0, 100.0)]
+    with pytest.raises(ParameterError, match="--segments"):
+        parse_segments("soon", t)
+
+
+def test_simulated_log_is_measured_against_the_sim_truth() -> None:
+    result = evaluate(PAPER_A)
+    assert result.truth.name == "sim"
+    assert not result.truth.is_reference
+    names = {r.name: r.kind for r in result.rows}
+    assert names == {
+        "mean": "method",
+        "support": "method",
+        "delay1": "method",
+        "delay2": "method",
+        "multilayer": "method",
+        "gps": "sensor",
+        "baro": "sensor",
+        "rangefinder": "sensor",
+    }
+    # the truth is referred to take-off like the sensors: 0 on the ground
+    lo, hi = result.prepared.referred.ground_window_s
+    t = result.prepared.referred.t
+    assert np.median(result.truth.h[(t >= lo) & (t <= hi)]) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_paper_a_support_beats_mean_while_the_baro_departs() -> None:
+    """Acceptance: on a paper-a log, support beats mean in the baro-departure segment."""
+    segments = simulate_flight("paper-a").profile.segments
+    lo, hi = (BOOT_S + v for v in segments["baro-departs"])
+    result = evaluate(PAPER_A, ["mean", "support"], segments=f"{lo},{hi}")
+    label = next(k for k, (a, b) in result.segments.items() if a == pytest.approx(lo))
+    rows = {r.name: r for r in result.rows}
+    support, mean = rows["support"].segments[label], rows["mean"].segments[label]
+    # measured: support 0.286 m, mean 0.829 m; the barometer alone 2.211 m
+    assert support.rmse < 0.4 * mean.rmse
+    assert support.max_abs < mean.max_abs
+
+
+def test_real_log_uses_the_ekf_as_a_reference_and_says_so(tmp_path: Path) -> None:
+    log = shared_log("ardupilot/beastayyg_log_0039_mechanical_failure.bin")
+    out, table = tmp_path / "r.json", tmp_path / "r.csv"
+    result = CliRunner().invoke(
+        cli, ["evaluate", str(log), "-o", str(out), "--csv", str(table), "--segments", "30"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "NKF1.-PD as reference (the autopilot's estimate, not truth)" in result.stdout
+    report = json.loads(out.read_text())
+    assert report["truth"]["is_reference"] is True
+    assert {r["name"] for r in report["rows"]} >= {"support", "mean", "gps", "baro", "rangefinder"}
+    assert len(report["segments"]) == 4  # 80.5-175.9 s in 30 s windows
+    frame = pd.read_csv(table)
+    assert set(frame.segment) == {"all", *report["segments"]}
+    assert set(frame.columns) == {"name", "kind", "segment", "n", "rmse", "mae", "max_abs", "bias"}
+
+
+def test_asking_for_a_reference_the_log_lacks_fails_in_one_line() -> None:
+    result = CliRunner().invoke(cli, ["evaluate", str(PAPER_A), "--truth", "ekf"])
+    assert result.exit_code == 1
+    assert "no XKF1/NKF1 or CTUN.Alt records" in result.stderr
+
+
+def test_method_that_cannot_run_is_listed() -> None:
+    log = shared_log("ardupilot/diaven_sample01.bin")  # no IMU: multilayer cannot run
+    result = CliRunner().invoke(cli, ["evaluate", str(log)])
+    assert result.exit_code == 0, result.output
+    assert "CTUN.Alt as reference" in result.stdout
+    assert "not run: multilayer:" in result.stdout
+
+
+@pytest.mark.parametrize("suffix", [".png", ".svg"])
+@pytest.mark.parametrize("command", ["fuse", "evaluate"])
+def test_plots_for_a_simulated_and_a_real_log(tmp_path: Path, command: str, suffix: str) -> None:
+    for log in (PAPER_A, shared_log("ardupilot/beastayyg_log_0039_mechanical_failure.bin")):
+        figure = tmp_path / f"{log.stem}{suffix}"
+        args = [command, str(log), "--plot", str(figure)]
+        if command == "fuse":
+            args += ["-o", str(tmp_path / "o.csv")]
+        result = CliRunner().invoke(cli, args)
+        assert result.exit_code == 0, result.output
+        head = figure.read_bytes()[:200]
+        assert (
+            head.startswith(b"\x89PNG") if suffix == ".png" else b"<svg" in head or b"<?xml" in head
+        )
+        assert figure.stat().st_size > 20_000
+    assert not list(tmp_path.glob(".*tmp*"))
+
+
+def test_plot_needs_a_known_format(tmp_path: Path) -> None:
+    out = tmp_path / "o.csv"
+    result = CliRunner().invoke(cli, ["fuse", str(PAPER_A), "-o", str(out), "--plot", "x.pdf"])
+    assert result.exit_code == 2
+    assert "--plot must end in .png or .svg" in result.stderr
+    assert not out.exists()
