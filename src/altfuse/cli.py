@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 import click
+from matplotlib.figure import Figure
 
 from altfuse import __version__
 from altfuse.errors import AltfuseError, ParameterError
@@ -35,9 +36,9 @@ from altfuse.info import describe
 from altfuse.io import read_log
 from altfuse.metrics import ErrorStats
 from altfuse.pipeline import FuseOptions, FuseRun, fuse_log
-from altfuse.plot import check_plot_path, figure
+from altfuse.plot import check_plot_path, figure, writer
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
-from altfuse.write import atomic_outputs, default_meta_path, write_outputs
+from altfuse.write import atomic_outputs, default_meta_path, write_json, write_outputs
 
 EXIT_BUG = 3
 #: Options that are parameters of a fusion method (passed on only when given).
@@ -199,9 +200,8 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
     )(command)
 
 
-def _draw(run: FuseRun, path: Path, fused: dict[str, Any], truth: Truth | None) -> None:
-    figure(
-        path,
+def _figure(run: FuseRun, fused: dict[str, Any], truth: Truth | None) -> Figure:
+    return figure(
         title=f"{Path(run.log.path).name}: {', '.join(fused)}",
         t=run.referred.t,
         names=run.referred.names,
@@ -212,6 +212,13 @@ def _draw(run: FuseRun, path: Path, fused: dict[str, Any], truth: Truth | None) 
         truth=None if truth is None else truth.h,
         truth_label="truth" if truth is None else truth.label,
     )
+
+
+def _truth_or_none(run: FuseRun) -> Truth | None:
+    try:
+        return choose_truth(run.log, run.referred)
+    except AltfuseError:
+        return None
 
 
 @cli.command()
@@ -312,13 +319,11 @@ def fuse(
             log.name,
             run.log.skipped_bytes,
         )
-    outputs = write_outputs(run, output, weights_path, meta_path)
+    extra = {}
     if plot_path is not None:
-        try:
-            truth: Truth | None = choose_truth(run.log, run.referred)
-        except AltfuseError:
-            truth = None
-        _draw(run, plot_path, {method: run.result.fused}, truth)
+        fig = _figure(run, {method: run.result.fused}, _truth_or_none(run))
+        extra[plot_path] = (writer(fig, plot_path), True)
+    outputs = write_outputs(run, output, weights_path, meta_path, extra)
     counts = run.provenance["status_counts"]
     click.echo(
         f"{output}: {run.referred.t.size} rows, method {method}, "
@@ -395,17 +400,15 @@ def evaluate(
             click.echo(_stats_line(row.name, row.kind, row.segments[label]))
     for method, why in result.failed.items():
         click.echo(f"not run: {method}: {why}")
-    report = result.as_dict()
     with atomic_outputs() as stage:
         if json_path is not None:
-            stage(json_path, lambda f: json.dump(report, f, indent=2, allow_nan=False))
+            stage(json_path, write_json(result.as_dict()))
         if csv_path is not None:
             stage(csv_path, lambda f: evaluation_table(result).to_csv(f, index=False))
-    if plot_path is not None and result.runs:
-        scores = {r.name: r.overall.rmse for r in result.rows if r.kind == "method"}
-        best = min(result.runs, key=lambda m: scores[m] if math.isfinite(scores[m]) else math.inf)
-        fused = {m: r.result.fused for m, r in result.runs.items()}
-        _draw(result.runs[best], plot_path, fused, result.truth)
+        if plot_path is not None and result.runs:
+            fused = {m: r.result.fused for m, r in result.runs.items()}
+            fig = _figure(result.runs[result.best()], fused, result.truth)
+            stage(plot_path, writer(fig, plot_path), binary=True)
 
 
 @cli.command()

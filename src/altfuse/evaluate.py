@@ -64,6 +64,11 @@ class Evaluation:
     failed: dict[str, str]
     segments: dict[str, tuple[float, float]]
 
+    def best(self) -> str:
+        """The method run with the lowest overall RMSE."""
+        scores = {r.name: r.overall.rmse for r in self.rows if r.kind == "method"}
+        return min(self.runs, key=lambda m: scores[m] if scores[m] == scores[m] else np.inf)
+
     def as_dict(self) -> dict[str, Any]:
         return {
             "log": Path(self.prepared.log.path).name,
@@ -167,12 +172,23 @@ def evaluate(
     A method that cannot run on the log (``multilayer`` without IMU) is listed in ``failed``.
     """
     options = options or FuseOptions()
+    options.check()
+    return evaluate_prepared(prepare(read_log(path), options), methods, options, truth, segments)
+
+
+def evaluate_prepared(
+    prepared: Prepared,
+    methods: Sequence[str] | None = None,
+    options: FuseOptions | None = None,
+    truth: str = "auto",
+    segments: str | None = None,
+) -> Evaluation:
+    """:func:`evaluate` on sources already prepared (read, aligned, referred)."""
+    options = options or FuseOptions()
     methods = list(methods or FUSERS)
     unknown = [m for m in methods if m not in FUSERS]
     if unknown:
         raise ParameterError(f"unknown method {unknown[0]!r}; choose from {', '.join(FUSERS)}")
-    options.check()
-    prepared = prepare(read_log(path), options)
     reference = choose_truth(prepared.log, prepared.referred, truth)
     t = prepared.referred.t
     spans = parse_segments(segments, t)

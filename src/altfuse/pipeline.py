@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import datetime as dt
 import inspect
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -123,6 +122,7 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
         inputs["dt_s"] = 1.0 / options.rate_hz
     result = fuser(referred.h, **inputs, **options.params)
     record = provenance(prepared, result)
+    record["options"] = asdict(options)
     if "accel_up" in inputs:
         record["vertical_acceleration"] = accel_record
     return FuseRun(
@@ -187,7 +187,6 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
     statuses, counts = np.unique(result.status, return_counts=True)
     return {
         "altfuse_version": __version__,
-        "created_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
         "input": {
             "file": Path(flight.path).name,
             "sha256": flight.sha256,

@@ -4,17 +4,17 @@
 2. the fused altitude over the sensors, with the truth or the reference when known;
 3. the weight each sensor received over time.
 
-The format follows the file's extension (PNG or SVG); the figure is written atomically. Figures are
-made with matplotlib's object API, without pyplot: no backend, window or global state.
+The format follows the file's extension (PNG or SVG). Figures are made with matplotlib's object API,
+without pyplot: no backend, window or global state.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import IO, Any
 
+import matplotlib
 from matplotlib.figure import Figure
 
 from altfuse.errors import ParameterError
@@ -39,7 +39,6 @@ def _colour(name: str) -> str | None:
 
 
 def figure(
-    path: str | Path,
     *,
     title: str,
     t: FloatArray,
@@ -50,9 +49,8 @@ def figure(
     weights_of: str,
     truth: FloatArray | None = None,
     truth_label: str = "truth",
-) -> Path:
-    """Draw the three panels and write them to ``path`` (PNG or SVG)."""
-    path = check_plot_path(path)
+) -> Figure:
+    """The three panels as a matplotlib figure (see :func:`writer` to save it)."""
     fig = Figure(figsize=(13, 9), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [3, 3, 2]})
     ax_sensors, ax_fused, ax_weights = axes
@@ -76,13 +74,17 @@ def figure(
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=8, frameon=False)
     fig.suptitle(title)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    return fig
+
+
+def writer(fig: Figure, path: Path) -> Callable[[IO[Any]], None]:
+    """Save ``fig`` in the format of ``path``'s extension, reproducibly (no date, fixed ids)."""
+    fmt = check_plot_path(path).suffix.lower().lstrip(".")
+
+    def save(handle: IO[Any]) -> None:
+        with matplotlib.rc_context({"svg.hashsalt": "altfuse"}):
+            fig.savefig(
+                handle, format=fmt, dpi=110, metadata={"Date": None} if fmt == "svg" else {}
+            )
+
+    return save

@@ -12,7 +12,7 @@ import os
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, TextIO
+from typing import IO, Any
 
 import numpy as np
 import pandas as pd
@@ -65,17 +65,25 @@ def default_meta_path(csv_path: Path) -> Path:
     return csv_path.with_suffix(".meta.json")
 
 
+Writer = Callable[[IO[Any]], None]
+
+
 @contextlib.contextmanager
-def atomic_outputs() -> Iterator[Callable[[Path, Callable[[TextIO], None]], None]]:
-    """Collect writes into temporary files; rename them all into place on success only."""
+def atomic_outputs() -> Iterator[Callable[..., None]]:
+    """Collect writes into temporary files; rename them into place, in staging order, on success
+    only. ``stage(target, write, binary=False)`` hands ``write`` an open text (or binary) file."""
     staged: list[tuple[str, Path]] = []
 
-    def stage(target: Path, write: Callable[[TextIO], None]) -> None:
+    def stage(target: Path, write: Writer, binary: bool = False) -> None:
         target.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
         staged.append((tmp, target))
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as handle:
-            write(handle)
+        if binary:
+            with os.fdopen(fd, "wb") as raw:
+                write(raw)
+        else:
+            with os.fdopen(fd, "w", newline="", encoding="utf-8") as text:
+                write(text)
 
     try:
         yield stage
@@ -88,19 +96,31 @@ def atomic_outputs() -> Iterator[Callable[[Path, Callable[[TextIO], None]], None
         os.replace(tmp, target)
 
 
+def write_json(data: Any) -> Writer:
+    """A writer of strict JSON (no NaN)."""
+    return lambda f: json.dump(data, f, indent=2, allow_nan=False, default=str)
+
+
 def write_outputs(
     run: FuseRun,
     csv_path: str | Path,
     weights_path: str | Path | None = None,
     meta_path: str | Path | None = None,
+    extra: dict[Path, tuple[Writer, bool]] | None = None,
 ) -> dict[str, str]:
-    """Write the CSV, the optional weight traces and the provenance sidecar; return their paths."""
+    """Write the CSV, the optional weight traces and ``extra`` files (path: (writer, binary)),
+    then the provenance sidecar, all or none. The sidecar is renamed into place last: a sidecar
+    whose listed outputs all exist marks a complete set. Returns the files written, by role."""
     csv_path = Path(csv_path)
     meta = Path(meta_path) if meta_path else default_meta_path(csv_path)
-    outputs = {"csv": str(csv_path), "meta": str(meta)}
+    outputs = {"csv": csv_path, "meta": meta}
     if weights_path:
-        outputs["weights"] = str(weights_path)
-    provenance = dict(run.provenance, outputs=outputs)
+        outputs["weights"] = Path(weights_path)
+    for path in extra or {}:
+        outputs[path.suffix.lstrip(".") or path.name] = path
+    # the sidecar names its siblings relative to itself: the same bytes wherever they are written
+    listed = {role: os.path.relpath(path, meta.parent) for role, path in outputs.items()}
+    provenance = dict(run.provenance, outputs=listed)
     with atomic_outputs() as stage:
         stage(
             csv_path, lambda f: fused_table(run).to_csv(f, index=False, float_format=FLOAT_FORMAT)
@@ -110,5 +130,7 @@ def write_outputs(
                 Path(weights_path),
                 lambda f: weights_table(run).to_csv(f, index=False, float_format=FLOAT_FORMAT),
             )
-        stage(meta, lambda f: json.dump(provenance, f, indent=2, allow_nan=False, default=str))
-    return outputs
+        for path, (write, binary) in (extra or {}).items():
+            stage(path, write, binary)
+        stage(meta, write_json(provenance))
+    return {role: str(path) for role, path in outputs.items()}

@@ -4,6 +4,10 @@ pymavlink reports damaged bytes with ``print()`` to Python's streams and, from i
 indexer, with C ``printf`` straight to file descriptors 1 and 2, below ``sys.stdout``. A CLI that
 promises one clean line per problem has to catch both; the text is handed to ``logging`` at
 DEBUG level so that ``-v -v`` still shows it.
+
+File descriptors belong to the process: two threads redirecting them at once would each restore
+the other's sink. A process-wide lock serialises the captured blocks (reading a log is a small part
+of a run; threads are how a Dask worker runs tasks).
 """
 
 from __future__ import annotations
@@ -15,9 +19,11 @@ import logging
 import os
 import sys
 import tempfile
+import threading
 from collections.abc import Iterator
 
 log = logging.getLogger(__name__)
+_FD_LOCK = threading.Lock()
 
 
 def _flush_c_stdio() -> None:
@@ -31,6 +37,12 @@ def captured_output() -> Iterator[list[str]]:
 
     Yields a list that holds the captured lines once the block has left.
     """
+    with _FD_LOCK, _captured() as lines:
+        yield lines
+
+
+@contextlib.contextmanager
+def _captured() -> Iterator[list[str]]:
     lines: list[str] = []
     py_buffer = io.StringIO()
     for stream in (sys.stdout, sys.stderr):
