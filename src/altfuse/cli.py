@@ -11,17 +11,18 @@ import json
 import logging
 import math
 import sys
+import time
 import traceback
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
 import click
-from matplotlib.figure import Figure
 
 from altfuse import __version__
+from altfuse.batch import EXIT_PARTIAL, SUMMARY, BatchOptions, LogResult, run_batch
 from altfuse.errors import AltfuseError, ParameterError
-from altfuse.evaluate import TRUTHS, Truth, choose_truth, evaluation_table
+from altfuse.evaluate import TRUTHS, evaluation_table, truth_or_none
 from altfuse.evaluate import evaluate as evaluate_log
 from altfuse.fuse import FUSERS
 from altfuse.fuse.complementary import (
@@ -35,8 +36,8 @@ from altfuse.fuse.support import DEFAULT_BETA, DEFAULT_WINDOW
 from altfuse.info import describe
 from altfuse.io import read_log
 from altfuse.metrics import ErrorStats
-from altfuse.pipeline import FuseOptions, FuseRun, fuse_log
-from altfuse.plot import check_plot_path, figure, writer
+from altfuse.pipeline import FuseOptions, fuse_log
+from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
 from altfuse.write import atomic_outputs, default_meta_path, write_json, write_outputs
 
@@ -107,6 +108,7 @@ def cli(verbose: int, quiet: bool, debug: bool) -> None:  # noqa: ARG001 (read i
     \b
     Example:
       altfuse fuse flight.bin -o flight.csv
+      altfuse batch logs/ -o results/
       altfuse info flight.bin
     """
     level = logging.ERROR if quiet else [logging.WARNING, logging.INFO][min(verbose, 1)]
@@ -198,27 +200,6 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
         type=_PATH,
         help="Also draw the sensors, the fused altitude and the weights (.png or .svg).",
     )(command)
-
-
-def _figure(run: FuseRun, fused: dict[str, Any], truth: Truth | None) -> Figure:
-    return figure(
-        title=f"{Path(run.log.path).name}: {', '.join(fused)}",
-        t=run.referred.t,
-        names=run.referred.names,
-        heights=run.referred.h,
-        fused=fused,
-        weights=run.result.weights,
-        weights_of=f"{run.result.method}, the lowest RMSE" if len(fused) > 1 else run.result.method,
-        truth=None if truth is None else truth.h,
-        truth_label="truth" if truth is None else truth.label,
-    )
-
-
-def _truth_or_none(run: FuseRun) -> Truth | None:
-    try:
-        return choose_truth(run.log, run.referred)
-    except AltfuseError:
-        return None
 
 
 @cli.command()
@@ -321,7 +302,8 @@ def fuse(
         )
     extra = {}
     if plot_path is not None:
-        fig = _figure(run, {method: run.result.fused}, _truth_or_none(run))
+        truth = truth_or_none(run.log, run.referred)
+        fig = run_figure(run, {method: run.result.fused}, truth, f"{log.name}: {method}")
         extra[plot_path] = (writer(fig, plot_path), True)
     outputs = write_outputs(run, output, weights_path, meta_path, extra)
     counts = run.provenance["status_counts"]
@@ -407,8 +389,131 @@ def evaluate(
             stage(csv_path, lambda f: evaluation_table(result).to_csv(f, index=False))
         if plot_path is not None and result.runs:
             fused = {m: r.result.fused for m, r in result.runs.items()}
-            fig = _figure(result.runs[result.best()], fused, result.truth)
+            best = result.best()
+            title = f"{log.name}: {', '.join(fused)} (weights: {best}, the lowest RMSE)"
+            fig = run_figure(result.runs[best], fused, result.truth, title)
             stage(plot_path, writer(fig, plot_path), binary=True)
+
+
+class _Progress:
+    """done / failed / remaining / ETA on one line of stderr, only when stderr is a terminal."""
+
+    def __init__(self) -> None:
+        self.enabled = sys.stderr.isatty()
+        self.started = time.monotonic()
+        self.done = self.failed = 0
+
+    def __call__(self, result: LogResult, total: int) -> None:
+        self.done += 1
+        self.failed += result.status == "failed"
+        if not self.enabled:
+            return
+        elapsed = time.monotonic() - self.started
+        left = total - self.done
+        eta = elapsed / self.done * left
+        click.echo(
+            f"\rdone {self.done}/{total}, failed {self.failed}, remaining {left}, "
+            f"ETA {int(eta) // 60}:{int(eta) % 60:02d}  ",
+            err=True,
+            nl=left == 0,
+        )
+
+
+@cli.command()
+@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="The folder for every log's outputs (mirroring the input tree) and summary.csv.",
+)
+@click.option(
+    "--pattern",
+    default="*.bin",
+    show_default=True,
+    help="File names to take, whatever their case (.bin and .BIN).",
+)
+@click.option(
+    "-j",
+    "--jobs",
+    type=int,
+    default=None,
+    help="Logs run at once in local processes [default: the number of cores].",
+)
+@click.option("--scheduler", help="Run on this Dask scheduler (tcp://host:8786) instead.")
+@click.option(
+    "--skip-existing",
+    is_flag=True,
+    help="Skip logs whose outputs are complete for this input and these options.",
+)
+@click.option(
+    "-m",
+    "--method",
+    type=click.Choice(list(FUSERS)),
+    default="support",
+    show_default=True,
+    help="Fusion method.",
+)
+@_pipeline_options
+@click.option("--weights", is_flag=True, help="Also write each log's weight traces.")
+@click.option(
+    "--plot",
+    "plot_format",
+    type=click.Choice(["png", "svg"]),
+    help="Also draw each log's figure in this format.",
+)
+@click.option(
+    "--evaluate",
+    "with_evaluation",
+    is_flag=True,
+    help="Also evaluate every method on each log (metrics in the summary).",
+)
+def batch(
+    paths: tuple[Path, ...],
+    output: Path,
+    pattern: str,
+    jobs: int | None,
+    scheduler: str | None,
+    skip_existing: bool,
+    method: str,
+    weights: bool,
+    plot_format: str | None,
+    with_evaluation: bool,
+    **options: Any,
+) -> None:
+    """Fuse every log under PATHS (folders searched recursively) into OUTPUT, in parallel.
+
+    Each log's outputs go under OUTPUT, mirroring the input tree; OUTPUT/summary.csv has one row
+    per log: status (ok, skipped, failed), the error, duration, sensors, samples, and with
+    --evaluate each method's RMSE and maximum error. Exit code 0 when every log succeeded, 4 when
+    some failed.
+
+    \b
+    Example:
+      altfuse batch logs/ -o results/
+      altfuse batch logs/ more/flight.bin -o results/ --jobs 2 --evaluate --plot png
+      altfuse batch logs/ -o results/ --skip-existing
+      altfuse batch logs/ -o results/ --scheduler tcp://10.0.0.5:8786
+    """
+    settings = BatchOptions(
+        fuse=FuseOptions(method=method, **options),
+        weights=weights,
+        plot=plot_format,
+        evaluate=with_evaluation,
+        skip_existing=skip_existing,
+    )
+    progress = _Progress()
+    results = run_batch(
+        paths, output, settings, pattern=pattern, jobs=jobs, scheduler=scheduler, on_result=progress
+    )
+    counts = {s: sum(r.status == s for r in results) for s in ("ok", "skipped", "failed")}
+    click.echo(
+        f"{output / SUMMARY}: {len(results)} logs, "
+        + ", ".join(f"{k} {v}" for k, v in counts.items())
+    )
+    if counts["failed"]:
+        sys.exit(EXIT_PARTIAL)
 
 
 @cli.command()

@@ -124,6 +124,14 @@ def choose_truth(flight: FlightLog, referred: Referred, which: str = "auto") -> 
     raise NoUsableSensorsError(f"{name}: no {wanted} records to measure against")
 
 
+def truth_or_none(flight: FlightLog, referred: Referred) -> Truth | None:
+    """:func:`choose_truth` (auto), or None when the log holds neither SIM nor an EKF."""
+    try:
+        return choose_truth(flight, referred)
+    except NoUsableSensorsError:
+        return None
+
+
 def parse_segments(spec: str | None, t: FloatArray) -> dict[str, tuple[float, float]]:
     """Segments of the clock from ``spec``: a length in seconds (``30``) for equal windows, or
     boundaries on the log's clock (``50.5,62.3``)."""

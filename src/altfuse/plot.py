@@ -12,13 +12,17 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import matplotlib
 from matplotlib.figure import Figure
 
 from altfuse.errors import ParameterError
 from altfuse.model import FloatArray
+
+if TYPE_CHECKING:
+    from altfuse.evaluate import Truth
+    from altfuse.pipeline import FuseRun
 
 FORMATS = (".png", ".svg")
 _SENSOR_COLOURS = {"gps": "tab:blue", "baro": "tab:orange", "rangefinder": "tab:green"}
@@ -75,6 +79,24 @@ def figure(
         ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=8, frameon=False)
     fig.suptitle(title)
     return fig
+
+
+def run_figure(
+    run: FuseRun, fused: Mapping[str, FloatArray], truth: Truth | None, title: str
+) -> Figure:
+    """The figure of a run: its sensors and weights, the ``fused`` curves, the truth if known.
+    With several curves, the weights shown are ``run``'s (say which in ``title``)."""
+    return figure(
+        title=title,
+        t=run.referred.t,
+        names=run.referred.names,
+        heights=run.referred.h,
+        fused=fused,
+        weights=run.result.weights,
+        weights_of=run.result.method,
+        truth=None if truth is None else truth.h,
+        truth_label="truth" if truth is None else truth.label,
+    )
 
 
 def writer(fig: Figure, path: Path) -> Callable[[IO[Any]], None]:

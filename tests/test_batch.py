@@ -1,0 +1,225 @@
+"""altfuse batch: many logs, in parallel, resumable, locally or on Dask."""
+
+from __future__ import annotations
+
+import filecmp
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from altfuse.batch import EXIT_PARTIAL, BatchOptions, find_logs, run_batch
+from altfuse.cli import cli
+from altfuse.errors import LogReadError, ParameterError
+from altfuse.pipeline import FuseOptions
+from conftest import ROOT, shared_log
+
+SAMPLES = ROOT / "sample_logs"
+
+
+def outputs(folder: Path) -> dict[str, Path]:
+    """Every per-log output under ``folder`` (not the summary, whose durations vary)."""
+    return {
+        str(p.relative_to(folder)): p
+        for p in sorted(folder.rglob("*"))
+        if p.is_file() and p.name != "summary.csv"
+    }
+
+
+def test_batch_over_the_shared_logs_explains_each_failure(tmp_path: Path) -> None:
+    folder = shared_log("ardupilot")
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["batch", str(folder), "-o", str(out), "--jobs", "2"])
+    assert result.exit_code == EXIT_PARTIAL, result.output
+    assert result.stderr == ""  # no progress bar when stderr is not a terminal
+    summary = pd.read_csv(out / "summary.csv", keep_default_na=False)
+    assert len(summary) == 11
+    failed = summary[summary.status == "failed"].set_index("log").error.to_dict()
+    assert set(failed) == {
+        "ardusubtools_small.BIN",
+        "hatemslah_demo-flight.bin",
+        "pfcFlightData_center_0003.bin",
+    }
+    assert "water depth" in failed["ardusubtools_small.BIN"]
+    assert "no usable altitude source" in failed["hatemslah_demo-flight.bin"]
+    assert "1 usable altitude source (gps)" in failed["pfcFlightData_center_0003.bin"]
+    ok = summary[summary.status == "ok"]
+    assert len(ok) == 8
+    assert (ok.samples > 0).all()
+    for log in ok.log:
+        stem = Path(log).with_suffix("").name
+        assert (out / f"{stem}.csv").exists()
+        assert (out / f"{stem}.meta.json").exists()
+    assert not list(out.glob(f"{Path('ardusubtools_small').name}*"))
+    assert "11 logs, ok 8, skipped 0, failed 3" in result.stdout
+
+
+def test_all_ok_exits_0_and_mirrors_the_tree(tmp_path: Path) -> None:
+    tree = tmp_path / "logs"
+    (tree / "day1").mkdir(parents=True)
+    (tree / "day2" / "copter").mkdir(parents=True)
+    shutil.copy(SAMPLES / "mission.bin", tree / "day1" / "a.bin")
+    shutil.copy(SAMPLES / "paper_a.bin", tree / "day2" / "copter" / "B.BIN")
+    (tree / "day1" / "notes.txt").write_text("not a log")
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["batch", str(tree), "-o", str(out), "--jobs", "1"])
+    assert result.exit_code == 0, result.output
+    assert (out / "day1" / "a.csv").exists()
+    assert (out / "day2" / "copter" / "B.meta.json").exists()
+    assert sorted(pd.read_csv(out / "summary.csv").log) == ["day1/a.bin", "day2/copter/B.BIN"]
+
+
+def test_finding_logs(tmp_path: Path) -> None:
+    (tmp_path / "x").mkdir()
+    for name in ("a.bin", "b.BIN", ".hidden.bin", "c.tlog", "x/d.Bin", "x/a.bin"):
+        (tmp_path / name).write_bytes(name.encode())
+    found = [str(rel) for _, rel in find_logs([tmp_path])]
+    assert found == ["a.bin", "b.BIN", "x/a.bin", "x/d.Bin"]
+    assert [str(rel) for _, rel in find_logs([tmp_path], "*.tlog")] == ["c.tlog"]
+    # a log named twice is run once
+    assert len(find_logs([tmp_path, tmp_path / "b.BIN"])) == 4
+    with pytest.raises(ParameterError, match="would write the same outputs"):
+        find_logs([tmp_path / "a.bin", tmp_path / "x" / "a.bin"])
+    with pytest.raises(LogReadError, match="no such file or folder"):
+        find_logs([tmp_path / "nope"])
+    with pytest.raises(LogReadError, match="no file matching"):
+        run_batch([tmp_path / "x"], tmp_path / "out", pattern="*.ulg")
+
+
+def test_nonsense_batch_options(tmp_path: Path) -> None:
+    for args, fragment in ((["--jobs", "0"], "--jobs"), (["--rate", "0"], "--rate")):
+        result = CliRunner().invoke(cli, ["batch", str(SAMPLES), "-o", str(tmp_path), *args])
+        assert result.exit_code == 2
+        assert fragment in result.stderr
+
+
+def test_evaluate_and_plot_in_a_batch(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    results = run_batch(
+        [SAMPLES / "paper_a.bin"],
+        out,
+        BatchOptions(evaluate=True, plot="png", weights=True),
+        jobs=1,
+    )
+    assert [r.status for r in results] == ["ok"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "paper_a.csv",
+        "paper_a.evaluation.json",
+        "paper_a.meta.json",
+        "paper_a.png",
+        "paper_a.weights.csv",
+        "summary.csv",
+    ]
+    summary = pd.read_csv(out / "summary.csv")
+    assert summary.truth[0] == "SIM.Alt"
+    assert summary.support_rmse[0] == pytest.approx(0.2355, abs=1e-3)
+
+
+def test_local_processes_and_a_dask_local_cluster_write_identical_outputs(tmp_path: Path) -> None:
+    distributed = pytest.importorskip("dask.distributed")
+    logs = [
+        SAMPLES,
+        shared_log("ardupilot/beastayyg_log_0039_mechanical_failure.bin"),
+        shared_log("ardupilot/hatemslah_demo-flight.bin"),
+    ]
+    options = BatchOptions(evaluate=True, plot="svg", weights=True)
+    local = run_batch(logs, tmp_path / "local", options, jobs=2)
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        remote = run_batch(logs, tmp_path / "dask", options, scheduler=cluster.scheduler_address)
+    assert sorted((r.log, r.status) for r in local) == sorted((r.log, r.status) for r in remote)
+    a, b = outputs(tmp_path / "local"), outputs(tmp_path / "dask")
+    assert sorted(a) == sorted(b)
+    assert len(a) == 5 * 5  # 4 samples + log 0039, five files each; hatemslah failed: none
+    different = [name for name in a if not filecmp.cmp(a[name], b[name], shallow=False)]
+    assert different == []
+
+
+def test_unreachable_scheduler_is_one_line(tmp_path: Path) -> None:
+    pytest.importorskip("dask.distributed")
+    result = CliRunner().invoke(
+        cli,
+        [
+            "batch",
+            str(SAMPLES / "mission.bin"),
+            "-o",
+            str(tmp_path),
+            "--scheduler",
+            "tcp://127.0.0.1:9",
+        ],
+    )
+    assert result.exit_code == 2
+    assert "cannot reach the Dask scheduler" in result.stderr
+
+
+def test_killed_batch_resumes_without_redoing_finished_logs(tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for i in range(6):
+        for sample in ("mission.bin", "paper_a.bin"):
+            shutil.copy(SAMPLES / sample, logs / f"{i}_{sample}")
+    out = tmp_path / "out"
+    command = [
+        sys.executable,
+        "-m",
+        "altfuse",
+        "batch",
+        str(logs),
+        "-o",
+        str(out),
+        "--jobs",
+        "1",
+        "--plot",
+        "png",
+    ]
+    proc = subprocess.Popen(
+        command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
+    deadline = time.monotonic() + 120
+    while len(list(out.glob("*.meta.json"))) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    done = {p.stem.removesuffix(".meta"): p.stat().st_mtime_ns for p in out.glob("*.meta.json")}
+    assert 3 <= len(done) < 12, "the batch was not killed midway"
+    assert not (out / "summary.csv").exists()
+    # every log is complete (all four files) or has no output at all
+    for stem in {p.name.split(".")[0] for p in out.iterdir() if not p.name.startswith(".")}:
+        files = sorted(p.name for p in out.glob(f"{stem}.*"))
+        assert files == [f"{stem}.csv", f"{stem}.meta.json", f"{stem}.png"] or stem not in done
+
+    command.append("--skip-existing")
+    rerun = subprocess.run(command, capture_output=True, text=True, timeout=300, check=False)
+    assert rerun.returncode == 0, rerun.stderr
+    summary = pd.read_csv(out / "summary.csv").set_index("log")
+    skipped = {Path(log).stem for log in summary.index[summary.status == "skipped"]}
+    assert skipped == set(done)
+    assert (summary.status[~summary.index.map(lambda x: Path(x).stem).isin(done)] == "ok").all()
+    for stem, mtime in done.items():
+        assert (out / f"{stem}.meta.json").stat().st_mtime_ns == mtime  # not redone
+    assert len(list(out.glob("*.meta.json"))) == 12
+    assert not list(out.glob(".*.tmp"))
+
+
+def test_skip_existing_redoes_changed_inputs_and_options(tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    shutil.copy(SAMPLES / "mission.bin", logs / "m.bin")
+    out = tmp_path / "out"
+    assert [r.status for r in run_batch([logs], out, jobs=1)] == ["ok"]
+    again = BatchOptions(skip_existing=True)
+    assert [r.status for r in run_batch([logs], out, again, jobs=1)] == ["skipped"]
+    other = BatchOptions(skip_existing=True, fuse=FuseOptions(method="mean"))
+    assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["ok"]
+    shutil.copy(SAMPLES / "paper_a.bin", logs / "m.bin")  # same name, new content
+    assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["ok"]
+    (out / "m.csv").unlink()  # an output lost
+    assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["ok"]
