@@ -98,7 +98,7 @@ def test_simulated_log_reads_back_what_was_written(tmp_path: Path) -> None:
     assert flight.skipped_bytes == 0
 
 
-def test_pymavlink_prints_are_kept_off_the_terminal(capfd: pytest.CaptureFixture[str]) -> None:
+def test_reading_a_damaged_log_prints_nothing(capfd: pytest.CaptureFixture[str]) -> None:
     flight = read_log(shared_log("ardupilot/rima48_test_cascade.BIN"))
     out, err = capfd.readouterr()
     assert out == ""

@@ -305,7 +305,9 @@ def fuse(
         truth = truth_or_none(run.log, run.referred)
         fig = run_figure(run, {method: run.result.fused}, truth, f"{log.name}: {method}")
         extra[plot_path] = (writer(fig, plot_path), True)
+    started = time.perf_counter()
     outputs = write_outputs(run, output, weights_path, meta_path, extra)
+    logging.getLogger("altfuse").info("wrote the outputs in %.2f s", time.perf_counter() - started)
     counts = run.provenance["status_counts"]
     click.echo(
         f"{output}: {run.referred.t.size} rows, method {method}, "

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import inspect
+import logging
+import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,6 +19,8 @@ from altfuse.fuse import FUSERS, LOG_INPUTS, FusionResult
 from altfuse.inertial import on_clock, vertical_acceleration
 from altfuse.io import read_log
 from altfuse.model import FlightLog, FloatArray, Series
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -100,10 +104,19 @@ def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
         )
     dropped = dict(flight.dropped_sources)
     _require_sensors(name, tuple(s.name for s in flight.sensors), options, dropped)
+    started = time.perf_counter()
     sensors = [tilt_correct(s, flight.attitude) for s in flight.sensors]
     sensors = [s for s in sensors if s.t.size]
     aligned = align(sensors, options.rate_hz, options.max_gap_s, options.span)
+    aligned_at = time.perf_counter()
     referred = refer_to_takeoff(aligned, options.ground_s, options.climb_m)
+    log.info(
+        "%s: aligned %d ticks in %.2f s, datum in %.2f s",
+        name,
+        aligned.t.size,
+        aligned_at - started,
+        time.perf_counter() - aligned_at,
+    )
     dropped.update(referred.dropped)
     _require_sensors(name, referred.names, options, dropped)
     return Prepared(flight, sensors, aligned, referred, dropped)
@@ -120,7 +133,14 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
         inputs["accel_up"], accel_record = accel_on_clock(flight, referred, options)
     if "dt_s" in wanted:
         inputs["dt_s"] = 1.0 / options.rate_hz
+    started = time.perf_counter()
     result = fuser(referred.h, **inputs, **options.params)
+    log.info(
+        "%s: fused with %s in %.2f s",
+        Path(flight.path).name,
+        options.method,
+        time.perf_counter() - started,
+    )
     record = provenance(prepared, result)
     record["options"] = asdict(options)
     if "accel_up" in inputs:
@@ -178,7 +198,15 @@ def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
     """Read the log at ``path`` and fuse its altitude sources (the ``altfuse fuse`` job)."""
     options = options or FuseOptions()
     options.check()
-    return fuse_flight(read_log(path), options)
+    started = time.perf_counter()
+    flight = read_log(path)
+    log.info(
+        "%s: read %d bytes in %.2f s",
+        Path(path).name,
+        flight.size_bytes,
+        time.perf_counter() - started,
+    )
+    return fuse_flight(flight, options)
 
 
 def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:

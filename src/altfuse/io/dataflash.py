@@ -31,19 +31,18 @@ inputs: EKF height (``XKF1``/``NKF1`` ``-PD``, with the EKF origin from ``ORGN``
 from __future__ import annotations
 
 import logging
-import math
 import re
-from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pymavlink import DFReader
+import numpy.typing as npt
+from pymavlink.DFReader import FORMAT_TO_STRUCT
 
 from altfuse.errors import LogReadError
 from altfuse.io import sha256_of
-from altfuse.io._quiet import captured_output
+from altfuse.io.fastdf import Index, _text, index_file
 from altfuse.model import Attitude, FlightLog, FloatArray, Imu, Series
 
 log = logging.getLogger(__name__)
@@ -77,48 +76,64 @@ _VEHICLE_OF = {
 }
 
 
+def _scaled(values: npt.NDArray[Any], char: str) -> FloatArray:
+    """A numeric field as pymavlink gives it: the legacy format scales divided out as it does."""
+    scale = FORMAT_TO_STRUCT[char][1]
+    out: FloatArray = values.astype(np.float64)
+    if scale is not None:
+        # pymavlink divides by 1/scale (more exact for 0.01 and 1e-7 than multiplying)
+        out = out / (1 / scale) if 0.0 < scale < 1.0 else out * scale
+    return out
+
+
 class _Records:
-    """The records of the wanted types from one sequential pass, with their unit metadata."""
+    """The decoded records of the wanted types, by type name, with their unit metadata."""
 
-    def __init__(self, reader: Any) -> None:
-        self.reader = reader
-        self.by_type: dict[str, list[Any]] = {}
-        self.counts: Counter[str] = Counter()
+    def __init__(self, index: Index) -> None:
+        self.index = index
+        self.formats = {f.name: f for f in index.formats.values()}
+        self.counts = index.counts()
+        self._tables: dict[str, npt.NDArray[Any]] = {}
         self.fmtu: dict[int, tuple[str, str]] = {}
-        self.decoded_bytes = 0
-        self.stopped: str | None = None
-
-    def collect(self) -> None:
-        while True:
-            try:
-                msg = self.reader.recv_msg()
-            except Exception as exc:  # pymavlink can raise anything on a damaged record
-                self.stopped = f"decoding stopped at byte {self.reader.offset}: {exc}"
-                break
-            if msg is None:
-                break
-            name = msg.fmt.name
-            self.counts[name] += 1
-            self.decoded_bytes += msg.fmt.len
-            if name == "FMTU":
-                self.fmtu[int(msg.FmtType)] = (str(msg.UnitIds), str(msg.MultIds))
-            elif name in WANTED_TYPES:
-                self.by_type.setdefault(name, []).append(msg)
+        self.unit_lookup: dict[str, str] = {}
+        self.mult_lookup: dict[str, float] = {}
+        if self.has("FMTU", "FmtType", "UnitIds", "MultIds"):
+            types = self.table("FMTU")["FmtType"].tolist()
+            unit_ids, mult_ids = self.text("FMTU", "UnitIds"), self.text("FMTU", "MultIds")
+            self.fmtu = {int(t): (u, m) for t, u, m in zip(types, unit_ids, mult_ids, strict=True)}
+        if self.has("UNIT", "Id", "Label"):
+            ids = self.table("UNIT")["Id"].tolist()
+            self.unit_lookup = dict(zip(map(_char, ids), self.text("UNIT", "Label"), strict=True))
+        if self.has("MULT", "Id", "Mult"):
+            ids = self.table("MULT")["Id"].tolist()
+            # pymavlink rounds the logged double to 7 significant digits
+            values = [float(f"{m:.7g}") for m in self.table("MULT")["Mult"].tolist()]
+            self.mult_lookup = dict(zip(map(_char, ids), values, strict=True))
 
     # -- access -----------------------------------------------------------------------------
 
+    def n(self, type_name: str) -> int:
+        return self.counts.get(type_name, 0)
+
+    def table(self, type_name: str) -> npt.NDArray[Any]:
+        if type_name not in self._tables:
+            self._tables[type_name] = self.index.records(self.formats[type_name].type_id)
+        return self._tables[type_name]
+
     def has(self, type_name: str, *fields: str) -> bool:
-        msgs = self.by_type.get(type_name)
-        return msgs is not None and all(f in msgs[0].fmt.colhash for f in fields)
+        fmt = self.formats.get(type_name)
+        return fmt is not None and self.n(type_name) > 0 and all(f in fmt.columns for f in fields)
 
     def raw(self, type_name: str, col: str) -> FloatArray:
-        msgs = self.by_type[type_name]
-        return np.fromiter(
-            (_as_float(getattr(m, col, math.nan)) for m in msgs), np.float64, len(msgs)
-        )
+        """A numeric field as pymavlink decodes it (legacy format scales applied)."""
+        fmt = self.formats[type_name]
+        return _scaled(self.table(type_name)[col], fmt.format[fmt.columns.index(col)])
+
+    def text(self, type_name: str, col: str) -> list[str]:
+        return [_text(v) for v in self.table(type_name)[col].tolist()]
 
     def column(self, type_name: str, col: str) -> FloatArray:
-        """Field values in the field's unit (format scale by pymavlink, FMTU multiplier here)."""
+        """Field values in the field's unit (format scale as pymavlink, FMTU multiplier here)."""
         return self.raw(type_name, col) * self.multiplier(type_name, col)
 
     def times(self, type_name: str) -> FloatArray:
@@ -127,37 +142,32 @@ class _Records:
             return self.raw(type_name, "TimeUS") / 1e6
         return self.raw(type_name, "TimeMS") / 1e3
 
-    def _field(self, type_name: str, col: str) -> tuple[Any, int]:
-        fmt = self.by_type[type_name][0].fmt
-        return fmt, fmt.colhash[col]
-
     def multiplier(self, type_name: str, col: str) -> float:
-        fmt, i = self._field(type_name, col)
+        fmt = self.formats[type_name]
+        i = fmt.columns.index(col)
         if fmt.format[i] in _SELF_SCALED:
             return 1.0
-        ids = self.fmtu.get(fmt.type)
+        ids = self.fmtu.get(fmt.type_id)
         if ids is None or i >= len(ids[1]) or ids[1][i] in _NO_MULTIPLIER:
             return 1.0
-        return float(self.reader.mult_lookup.get(ids[1][i], 1.0))
+        return float(self.mult_lookup.get(ids[1][i], 1.0))
 
     def unit(self, type_name: str, col: str) -> str:
-        fmt, i = self._field(type_name, col)
-        ids = self.fmtu.get(fmt.type)
+        fmt = self.formats[type_name]
+        i = fmt.columns.index(col)
+        ids = self.fmtu.get(fmt.type_id)
         if ids is None or i >= len(ids[0]):
             return ""
-        return str(self.reader.unit_lookup.get(ids[0][i], ""))
+        return str(self.unit_lookup.get(ids[0][i], ""))
 
 
-def _as_float(value: Any) -> float:
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return math.nan
+def _char(value: int) -> str:
+    return chr(value % 256)
 
 
 def _instances(rec: _Records, type_name: str, field: str, default: int) -> Iterator[Any]:
     """Yield (instance number, boolean mask) for each instance in ``type_name``'s records."""
-    n = len(rec.by_type[type_name])
+    n = rec.n(type_name)
     if not rec.has(type_name, field):
         yield default, np.ones(n, dtype=bool)
         return
@@ -311,7 +321,7 @@ def _read_rangefinder(b: _Builder) -> bool:
             default=0,
             invalid=_rangefinder_invalid(b, rfnd, "Dist", "Stat"),
         )
-    elif rfnd in b.rec.by_type:
+    elif b.rec.n(rfnd):
         for inst in (0, 1):
             dist = f"Dist{inst + 1}"
             if not b.rec.has(rfnd, dist):
@@ -323,7 +333,7 @@ def _read_rangefinder(b: _Builder) -> bool:
                 type_name=rfnd,
                 col=dist,
                 datum=_GROUND,
-                select=np.ones(len(b.rec.by_type[rfnd]), dtype=bool),
+                select=np.ones(b.rec.n(rfnd), dtype=bool),
                 invalid=_rangefinder_invalid(b, rfnd, dist, f"Stat{inst + 1}"),
             )
     for col in ("Dist", "DistCM"):
@@ -335,16 +345,16 @@ def _read_rangefinder(b: _Builder) -> bool:
                 type_name="SONR",
                 col=col,
                 datum=_GROUND,
-                select=np.ones(len(b.rec.by_type["SONR"]), dtype=bool),
+                select=np.ones(b.rec.n("SONR"), dtype=bool),
                 invalid={"0 (no reading)": b.rec.raw("SONR", col) <= 0},
             )
     return found
 
 
 def _read_ctun_fallbacks(b: _Builder, have_baro: bool, have_rangefinder: bool) -> None:
-    if "CTUN" not in b.rec.by_type:
+    if not b.rec.n("CTUN"):
         return
-    everything = np.ones(len(b.rec.by_type["CTUN"]), dtype=bool)
+    everything = np.ones(b.rec.n("CTUN"), dtype=bool)
     if not have_baro:
         for col in ("BAlt", "BarAlt"):
             if b.rec.has("CTUN", col):
@@ -384,7 +394,7 @@ def _reference(
 ) -> Series | None:
     if not rec.has(type_name, col):
         return None
-    select = np.ones(len(rec.by_type[type_name]), dtype=bool)
+    select = np.ones(rec.n(type_name), dtype=bool)
     if rec.has(type_name, "C"):  # EKF3 logs one record per core: take core 0
         select = rec.raw(type_name, "C") == 0
     t = rec.times(type_name)[select]
@@ -421,7 +431,7 @@ def _read_references(rec: _Records) -> list[Series]:
 def _read_imu(rec: _Records) -> Imu | None:
     if not rec.has("IMU", "AccX", "AccY", "AccZ"):
         return None
-    select = np.ones(len(rec.by_type["IMU"]), dtype=bool)
+    select = np.ones(rec.n("IMU"), dtype=bool)
     if rec.has("IMU", "I"):
         select = rec.raw("IMU", "I") == 0
     acc = np.column_stack([rec.column("IMU", c)[select] for c in ("AccX", "AccY", "AccZ")])
@@ -436,8 +446,8 @@ def _read_attitude(rec: _Records) -> Attitude | None:
 
 
 def _firmware(rec: _Records) -> tuple[str, str]:
-    texts = [str(getattr(m, "FWS", "")) for m in rec.by_type.get("VER", [])]
-    texts += [str(getattr(m, "Message", "")) for m in rec.by_type.get("MSG", [])]
+    texts = rec.text("VER", "FWS") if rec.has("VER", "FWS") else []
+    texts += rec.text("MSG", "Message") if rec.has("MSG", "Message") else []
     for text in texts:
         match = _FIRMWARE_RE.search(text)
         if match:
@@ -454,34 +464,23 @@ def read_dataflash(path: str | Path) -> FlightLog:
         pymavlink cannot open the file as a DataFlash log.
     """
     path = Path(path)
-    with captured_output() as printed:
-        try:
-            reader = DFReader.DFReader_binary(str(path), zero_time_base=False)
-        except Exception as exc:
-            raise LogReadError(f"{path}: not a readable DataFlash log ({exc})") from exc
-        rec = _Records(reader)
-        try:
-            rec.collect()
-        finally:
-            reader.filehandle.close()
-    if printed:
-        log.debug("pymavlink printed %d lines while reading %s", len(printed), path)
-
+    try:
+        rec = _Records(index_file(path))
+    except OSError as exc:
+        raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
     b = _Builder(rec)
     _read_gps(b)
     have_baro = _read_baro(b)
     have_rangefinder = _read_rangefinder(b)
     _read_ctun_fallbacks(b, have_baro, have_rangefinder)
-    if rec.stopped:
-        b.notes.append(rec.stopped)
     vehicle, firmware = _firmware(rec)
-    skipped = max(0, int(reader.data_len) - rec.decoded_bytes)
+    skipped = rec.index.size - rec.index.decoded_bytes
     if skipped:
         b.notes.append(f"{skipped} bytes were not part of any decodable record")
     return FlightLog(
         path=str(path),
         sha256=sha256_of(path),
-        size_bytes=int(reader.data_len),
+        size_bytes=rec.index.size,
         vehicle=vehicle,
         firmware=firmware,
         sensors=tuple(b.sensors[k] for k in sorted(b.sensors, key=_sensor_order)),

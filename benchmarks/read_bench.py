@@ -1,0 +1,182 @@
+"""Reading a big log: altfuse's extraction against pymavlink and against a plain pass.
+
+Run on demand:  python benchmarks/read_bench.py [--mb 300] [--source LOG] [--keep PATH]
+
+Each figure is the median of ``--repeat`` runs (the pymavlink loop runs once). Builds a log of at
+least ``--mb`` megabytes from a real one (default: beastayyg_log_0036, a
+Copter 3.4 flight with GPS, BARO, IMU, ATT, NKF1, CTUN): its FMT/FMTU/UNIT/MULT/PARM records once,
+then its data records repeated, each copy's TimeUS shifted past the previous one. Then, each in a
+fresh process (so that peak memory is that of the measurement alone):
+
+- ``altfuse``: ``read_dataflash``, split into the index, the decoding and the file's sha256;
+- ``pymavlink``: a ``recv_match`` loop over the types altfuse reads;
+- ``plain``: one numpy pass over the file's bytes (read them, count the 0xA3 bytes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from altfuse.io.fastdf import HEADER, index_file
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_SOURCE = (
+    ROOT.parent / "shared" / "logs" / "ardupilot" / ("beastayyg_log_0036_mechanical_failure.bin")
+)
+ONCE = {"FMT", "FMTU", "UNIT", "MULT", "PARM"}
+TYPES = ["GPS", "GPS2", "BARO", "BAR2", "RFND", "SONR", "CTUN", "IMU", "ATT", "XKF1", "NKF1",
+         "ORGN", "AHR2", "POS", "SIM", "MSG", "VER", "FMTU"]  # fmt: skip
+
+
+def build(source: Path, target: Path, megabytes: float) -> int:
+    """Write a log of at least ``megabytes`` MB from ``source``; return its size in bytes."""
+    index = index_file(source)
+    data = index.data
+    once, block, shift_at = [], [], []
+    position = 0
+    for offset, type_id in zip(index.offsets.tolist(), index.types.tolist(), strict=True):
+        fmt = index.formats[type_id]
+        record = data[offset : offset + fmt.length]
+        if fmt.name in ONCE:
+            once.append(record)
+            continue
+        if fmt.columns[:1] == ("TimeUS",) and fmt.format[:1] == "Q":
+            shift_at.append(position + HEADER)
+        block.append(record)
+        position += fmt.length
+    head = np.concatenate(once)
+    body = np.concatenate(block)
+    where = np.array(shift_at, dtype=np.int64)
+    stamps = body[where[:, None] + np.arange(8)].copy().view("<u8").ravel()
+    span = int(stamps.max() - stamps.min()) + 1_000_000
+    copies = int(np.ceil(megabytes * 1e6 / body.size))
+    with target.open("wb") as out:
+        out.write(head.tobytes())
+        for k in range(copies):
+            shifted = (stamps + np.uint64(k * span)).view(np.uint8).reshape(-1, 8)
+            body[where[:, None] + np.arange(8)] = shifted
+            out.write(body.tobytes())
+    return target.stat().st_size
+
+
+CHILD = {
+    "altfuse": """
+import time, hashlib
+from altfuse.io.fastdf import index_file
+from altfuse.io.dataflash import read_dataflash, _Records
+from altfuse.io import sha256_of
+t0 = time.perf_counter(); index = index_file(PATH); t1 = time.perf_counter()
+rec = _Records(index)
+for name in TYPES:
+    if rec.n(name): rec.table(name)
+t2 = time.perf_counter()
+RESULT = {"index_s": t1 - t0, "decode_s": t2 - t1, "records": int(index.offsets.size)}
+""",
+    "read_dataflash": """
+import time
+from altfuse.io.dataflash import read_dataflash
+t0 = time.perf_counter(); flight = read_dataflash(PATH); t1 = time.perf_counter()
+RESULT = {"seconds": t1 - t0}
+""",
+    "sha256": """
+import time, pathlib
+from altfuse.io import sha256_of
+t0 = time.perf_counter()
+sha256_of(pathlib.Path(PATH))
+RESULT = {"seconds": time.perf_counter() - t0}
+""",
+    "pymavlink": """
+import time
+from pymavlink import mavutil
+t0 = time.perf_counter()
+conn = mavutil.mavlink_connection(PATH)
+n = 0
+while conn.recv_match(type=TYPES) is not None:
+    n += 1
+RESULT = {"seconds": time.perf_counter() - t0, "records": n}
+""",
+    "plain": """
+import time, numpy as np
+t0 = time.perf_counter()
+data = np.fromfile(PATH, dtype=np.uint8)
+count = int(np.count_nonzero(data == 0xA3))
+RESULT = {"seconds": time.perf_counter() - t0, "a3_bytes": count}
+""",
+}
+
+
+def median_of(runs: int, kind: str, path: Path) -> dict[str, float]:
+    """The run with the median total time of ``runs`` fresh-process runs."""
+    results = [measure(kind, path) for _ in range(runs)]
+    key = "seconds" if "seconds" in results[0] else "index_s"
+    return sorted(results, key=lambda r: r[key] + r.get("decode_s", 0.0))[runs // 2]
+
+
+def measure(kind: str, path: Path) -> dict[str, float]:
+    code = (
+        f"PATH = {str(path)!r}\nTYPES = {TYPES!r}\n"
+        + CHILD[kind]
+        + "\nimport json, resource\nRESULT['peak_mb'] = "
+        "resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024\nprint(json.dumps(RESULT))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    result: dict[str, float] = json.loads(out.stdout.strip().splitlines()[-1])
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--mb", type=float, default=300.0)
+    parser.add_argument("--source", type=Path, default=DEFAULT_SOURCE)
+    parser.add_argument("--keep", type=Path, help="write the big log here and keep it")
+    parser.add_argument("--skip-pymavlink", action="store_true")
+    parser.add_argument("--repeat", type=int, default=3, help="runs per measurement (median)")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        path = args.keep or Path(tmp) / "big.bin"
+        started = time.perf_counter()
+        if path.exists() and path.stat().st_size >= args.mb * 1e6:
+            size = path.stat().st_size
+            print(f"using {path}: {size / 1e6:.1f} MB")
+        else:
+            size = build(args.source, path, args.mb)
+            print(
+                f"built {path.name}: {size / 1e6:.1f} MB in {time.perf_counter() - started:.1f} s"
+            )
+        plain = median_of(args.repeat, "plain", path)
+        ours = median_of(args.repeat, "altfuse", path)
+        whole = median_of(args.repeat, "read_dataflash", path)
+        digest = median_of(args.repeat, "sha256", path)
+        extraction = ours["index_s"] + ours["decode_s"]
+        file_mb = size / 2**20
+        print(f"plain numpy pass: {plain['seconds']:.2f} s, peak {plain['peak_mb']:.0f} MB")
+        print(
+            f"altfuse extraction: index {ours['index_s']:.2f} s + decode {ours['decode_s']:.2f}"
+            f" s = {extraction:.2f} s ({extraction / plain['seconds']:.2f}x the plain pass), "
+            f"{ours['records']:,} records, peak {ours['peak_mb']:.0f} MB "
+            f"({ours['peak_mb'] / file_mb:.2f}x the file)"
+        )
+        print(
+            f"read_dataflash (extraction, series, references, sha256): "
+            f"{whole['seconds']:.2f} s, peak {whole['peak_mb']:.0f} MB "
+            f"({whole['peak_mb'] / file_mb:.2f}x the file); sha256 alone {digest['seconds']:.2f} s"
+        )
+        if not args.skip_pymavlink:
+            theirs = measure("pymavlink", path)
+            print(
+                f"pymavlink recv_match loop: {theirs['seconds']:.1f} s, "
+                f"{theirs['records']:,} records, peak {theirs['peak_mb']:.0f} MB; altfuse "
+                f"extraction is {theirs['seconds'] / extraction:.0f}x faster"
+            )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,250 @@
+"""Vectorised DataFlash decoding: per-type column arrays straight from the file's bytes.
+
+pymavlink stays the authority on the format: its format-character table (``FORMAT_TO_STRUCT``)
+gives every field's binary layout and scale, and the tests compare every value with its decoding.
+What this module changes is the *how*: instead of one Python object per record, it
+
+1. memory-maps the file read-only and finds every ``A3 95`` header pair with numpy, in chunks;
+2. reads the FMT records (type 128, 89 bytes) among them to learn each type's length and layout;
+3. walks the record chain as pymavlink's sequential parser does: a record of a known type at
+   offset ``p`` is followed by the next header at or after ``p + length``; anything in between
+   is skipped (the resync on the header bytes). The walk is vectorised: every candidate header
+   points to its successor, and candidates no chain from the start of the file reaches (headers
+   that happen to appear inside a record's payload, or in damaged bytes) are pruned by repeatedly
+   removing the ones nothing points to;
+4. decodes only the requested types, all records of a type at once: their bytes gathered by
+   offset from a strided view of the file, then read through a structured dtype built from the
+   type's format string.
+
+Like pymavlink's parser, the walk stops at the first record that the file ends inside, and a
+type is known only from its FMT record on. The bytes not in any record are the skipped bytes.
+"""
+
+from __future__ import annotations
+
+import mmap
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from numpy.lib.stride_tricks import as_strided
+from pymavlink.DFReader import FORMAT_TO_STRUCT
+
+HEAD1, HEAD2 = 0xA3, 0x95
+FMT_TYPE = 0x80
+FMT_LENGTH = 89
+HEADER = 3
+_CHUNK = 1 << 24  # header search in 16 MiB chunks: bounded temporaries
+_MAX_PRUNE_ROUNDS = 10_000
+
+#: numpy dtype of each struct code in FORMAT_TO_STRUCT (little-endian, as DataFlash is).
+_NUMPY = {
+    "b": "i1", "B": "u1", "h": "<i2", "H": "<u2", "i": "<i4", "I": "<u4", "q": "<i8",
+    "Q": "<u8", "f": "<f4", "d": "<f8", "e": "<f2", "4s": "S4", "16s": "S16", "64s": "S64",
+}  # fmt: skip
+
+
+class FormatError(ValueError):
+    """A FMT record whose format string altfuse cannot lay out."""
+
+
+@dataclass(frozen=True)
+class Format:
+    """One record type as its FMT record declares it."""
+
+    type_id: int
+    name: str
+    length: int
+    format: str
+    columns: tuple[str, ...]
+    dtype: np.dtype[Any] = field(repr=False)
+
+    @classmethod
+    def build(cls, type_id: int, name: str, length: int, fmt: str, columns: str) -> Format:
+        names = tuple(columns.split(",")) if columns else ()
+        fields = []
+        for i, char in enumerate(fmt):
+            if char not in FORMAT_TO_STRUCT:
+                raise FormatError(f"{name}: unknown format character {char!r}")
+            struct_code = FORMAT_TO_STRUCT[char][0]
+            np_type = "(32,)<i2" if char == "a" else _NUMPY[struct_code]
+            fields.append((names[i] if i < len(names) else f"_{i}", np_type))
+        dtype = np.dtype(fields)
+        if dtype.itemsize != length - HEADER:
+            raise FormatError(
+                f"{name}: format {fmt!r} is {dtype.itemsize} bytes, FMT says {length}"
+            )
+        return cls(type_id, name, length, fmt, names, dtype)
+
+
+@dataclass
+class Index:
+    """Where the records are: offsets and type ids of the chain, and the formats."""
+
+    data: npt.NDArray[np.uint8]
+    offsets: npt.NDArray[np.integer[Any]]
+    types: npt.NDArray[np.uint8]
+    formats: dict[int, Format]
+    size: int
+
+    @property
+    def decoded_bytes(self) -> int:
+        lengths = np.zeros(256, dtype=np.int64)
+        for f in self.formats.values():
+            lengths[f.type_id] = f.length
+        return int(lengths[self.types].sum())
+
+    def counts(self) -> dict[str, int]:
+        per_type = np.bincount(self.types, minlength=256)
+        return {f.name: int(per_type[t]) for t, f in self.formats.items() if per_type[t]}
+
+    def records(self, type_id: int) -> npt.NDArray[Any]:
+        """All records of ``type_id`` as a structured array (a copy), in file order."""
+        fmt = self.formats[type_id]
+        offsets = self.offsets[self.types == type_id].astype(np.int64) + HEADER
+        if offsets.size == 0:
+            return np.zeros(0, dtype=fmt.dtype)
+        width = fmt.dtype.itemsize
+        # every byte offset as the start of a row of ``width`` bytes (a view, no copy); gathering
+        # plain bytes is ~3x faster than gathering unaligned structured items
+        windows = as_strided(self.data, shape=(self.data.size - width + 1, width), strides=(1, 1))
+        rows: npt.NDArray[Any] = windows[offsets].view(fmt.dtype).reshape(-1)
+        return rows
+
+
+def _headers(data: npt.NDArray[np.uint8]) -> npt.NDArray[np.integer[Any]]:
+    """Offsets of every A3 95 pair followed by at least a type byte (int32 below 2 GiB)."""
+    dtype = np.int32 if data.size < 2**31 - 1024 else np.int64
+    found = []
+    for start in range(0, max(data.size - 2, 0), _CHUNK):
+        stop = min(start + _CHUNK, data.size - 2)
+        window = data[start : stop + 1]
+        hit = np.flatnonzero(window[:-1] == HEAD1)  # 0xA3 is rare outside headers
+        hit = hit[window[hit + 1] == HEAD2]
+        found.append(hit.astype(dtype) + dtype(start))
+    return np.concatenate(found) if found else np.zeros(0, dtype=dtype)
+
+
+def _text(raw: bytes) -> str:
+    raw = raw.split(b"\0", 1)[0]
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return raw.decode("ISO-8859-1")
+
+
+def _formats(
+    data: npt.NDArray[np.uint8], at: npt.NDArray[np.integer[Any]]
+) -> tuple[dict[int, Format], dict[int, int]]:
+    """The well-formed FMT records at ``at``: formats by type id, and where each was defined."""
+    fmt_dtype = Format.build(
+        FMT_TYPE, "FMT", FMT_LENGTH, "BBnNZ", "Type,Length,Name,Format,Columns"
+    ).dtype
+    at = at[at + FMT_LENGTH <= data.size]
+    formats: dict[int, Format] = {
+        FMT_TYPE: Format.build(
+            FMT_TYPE, "FMT", FMT_LENGTH, "BBnNZ", "Type,Length,Name,Format,Columns"
+        )
+    }
+    first: dict[int, int] = {FMT_TYPE: -1}
+    if at.size == 0:
+        return formats, first
+    count = data.size - fmt_dtype.itemsize + 1
+    rows = np.ndarray(shape=(count,), dtype=fmt_dtype, buffer=data, strides=(1,))[at + HEADER]
+    for offset, row in zip(at.tolist(), rows, strict=True):
+        type_id, length = int(row["Type"]), int(row["Length"])
+        if type_id in formats or length <= HEADER:
+            continue
+        try:
+            formats[type_id] = Format.build(
+                type_id, _text(row["Name"]), length, _text(row["Format"]), _text(row["Columns"])
+            )
+        except (FormatError, ValueError, KeyError):
+            continue
+        first[type_id] = offset
+    return formats, first
+
+
+def _chain(
+    heads: npt.NDArray[np.integer[Any]],
+    types: npt.NDArray[np.uint8],
+    lengths: npt.NDArray[np.integer[Any]],
+    size: int,
+) -> npt.NDArray[np.bool_]:
+    """Which candidate headers are records of the chain that starts at the first one."""
+    n = heads.size
+    if n == 0:
+        return np.zeros(0, dtype=bool)
+    ends = heads + lengths[types]
+    fits = ends <= size
+    # successor: the first candidate at or after this record's end; n means "the end". A record
+    # the file ends inside stops the parse: nothing after it is reached from it.
+    succ = np.arange(1, n + 1, dtype=heads.dtype)
+    # nearly always the next candidate is the successor; search only where it is not
+    odd = np.flatnonzero(heads[1:] != ends[:-1])
+    succ[odd] = np.searchsorted(heads, ends[odd], side="left")
+    del ends
+    succ[~fits] = n
+    alive = np.ones(n, dtype=bool)
+    pointed = np.zeros(n + 1, dtype=bool)
+    for _ in range(_MAX_PRUNE_ROUNDS):
+        pointed[:] = False
+        pointed[succ] = True  # the dead point at n (below), so no mask copy is needed
+        dead = alive & ~pointed[:n]
+        dead[0] = False  # the chain's start
+        if not dead.any():
+            break
+        alive &= ~dead
+        succ[dead] = n
+    else:  # pragma: no cover - only for adversarial input; walk it instead
+        alive = _walk(succ, n)
+    # the truncated record itself is not a record either
+    return alive & fits
+
+
+def _walk(succ: npt.NDArray[np.integer[Any]], n: int) -> npt.NDArray[np.bool_]:
+    alive = np.zeros(n, dtype=bool)
+    i = 0
+    while i < n:
+        alive[i] = True
+        i = int(succ[i])
+    return alive
+
+
+def index_file(path: str | Path) -> Index:
+    """Map ``path`` read-only and find its records as pymavlink's sequential parser would."""
+    with Path(path).open("rb") as handle:
+        size = handle.seek(0, 2)
+        if size == 0:
+            return Index(np.zeros(0, np.uint8), np.zeros(0, np.int64), np.zeros(0, np.uint8), {}, 0)
+        mapped = mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ)
+    data = np.frombuffer(mapped, dtype=np.uint8)
+    heads = _headers(data)
+    heads = heads[heads <= size - HEADER]
+    all_types = data[heads + 2]
+    fmt_heads = heads[all_types == FMT_TYPE]
+    # FMT records define the types; a pattern inside a payload that looks like one must not. The
+    # first walk trusts every FMT candidate, the next only those on the chain, until stable.
+    for _ in range(3):
+        formats, first = _formats(data, fmt_heads)
+        known = np.zeros(256, dtype=bool)
+        first_at = np.full(256, np.iinfo(np.int64).max, dtype=np.int64)
+        lengths = np.zeros(256, dtype=heads.dtype)
+        for type_id, fmt in formats.items():
+            known[type_id] = True
+            first_at[type_id] = first[type_id]
+            lengths[type_id] = fmt.length
+        # a type is known from its FMT record on, as in pymavlink's sequential parser (only the
+        # candidates before the last first definition can be affected)
+        usable = known[all_types]
+        early = np.arange(np.searchsorted(heads, first_at[known].max()))
+        usable[early] &= heads[early] > first_at[all_types[early]]
+        cand, types = heads[usable], all_types[usable]
+        on_chain = _chain(cand, types, lengths, size)
+        chained_fmt = cand[on_chain & (types == FMT_TYPE)]
+        if np.array_equal(chained_fmt, fmt_heads):
+            break
+        fmt_heads = chained_fmt
+    return Index(data, cand[on_chain], types[on_chain], formats, size)
