@@ -1,15 +1,13 @@
-"""ArduPilot DataFlash (``.bin``) reader, through pymavlink.
+"""ArduPilot DataFlash (``.bin``) reader.
 
-pymavlink is the authority on the format: it parses FMT records, decodes each record and applies
-the scale implied by the legacy format characters (``c C e E`` ×0.01, ``L`` ×1e-7). It does not
-apply the FMTU multipliers that newer logs use instead (an ``h`` field with multiplier ``B`` holds
-centimetres); this module does, from the log's own FMTU/UNIT/MULT records, and checks that every
-altitude field is in metres.
-
-The log is read in one sequential pass (``recv_msg``), not through pymavlink's type index: in a
-damaged log the index can stop at the first header of an undefined type and hide every later
-record, while the sequential parser resynchronises on the header bytes and finds them
-(ALGORITHMS.md section 5).
+The records come from :mod:`altfuse.io.fastdf`, which finds and decodes them with numpy as
+pymavlink's sequential parser would (it resynchronises on damage, where pymavlink's type index can
+hide every record after the first undefined header: ALGORITHMS.md section 5), and gives each
+numeric field the value pymavlink gives it: the scale of the legacy format characters
+(``c C e E`` x0.01, ``L`` x1e-7) divided out as pymavlink does. pymavlink does not apply the FMTU
+multipliers that newer logs use instead (an ``h`` field with multiplier ``B`` holds centimetres);
+this module does, from the log's own FMTU/UNIT/MULT records, and checks that every altitude field
+is in metres.
 
 What is read
 ------------
