@@ -218,7 +218,13 @@ def test_skip_existing_redoes_changed_inputs_and_options(tmp_path: Path) -> None
     again = BatchOptions(skip_existing=True)
     assert [r.status for r in run_batch([logs], out, again, jobs=1)] == ["skipped"]
     other = BatchOptions(skip_existing=True, fuse=FuseOptions(method="mean"))
+    # stale outputs (other options) are not overwritten without --force
+    [refused] = run_batch([logs], out, other, jobs=1)
+    assert refused.status == "failed"
+    assert "exists; --force overwrites" in refused.error
+    other = BatchOptions(skip_existing=True, force=True, fuse=FuseOptions(method="mean"))
     assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["ok"]
+    assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["skipped"]
     shutil.copy(SAMPLES / "paper_a.bin", logs / "m.bin")  # same name, new content
     assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["ok"]
     (out / "m.csv").unlink()  # an output lost

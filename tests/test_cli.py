@@ -219,8 +219,8 @@ def test_skipped_bytes_are_one_warning_line(tmp_path: Path) -> None:
     result = run("fuse", shared_log("ardupilot/rima48_test_cascade.BIN"), "-o", tmp_path / "o.csv")
     assert result.exit_code == 0
     assert result.stderr.strip().splitlines() == [
-        "altfuse: warning: rima48_test_cascade.BIN: 50723 bytes were not part of any decodable "
-        "record and were skipped"
+        "altfuse: warning: rima48_test_cascade.BIN: 50723 bytes skipped (not part of any "
+        "decodable record)"
     ]
 
 

@@ -113,7 +113,7 @@ def test_plots_for_a_simulated_and_a_real_log(tmp_path: Path, command: str, suff
         figure = tmp_path / f"{log.stem}{suffix}"
         args = [command, str(log), "--plot", str(figure)]
         if command == "fuse":
-            args += ["-o", str(tmp_path / "o.csv")]
+            args += ["-o", str(tmp_path / f"{log.stem}.csv")]
         result = CliRunner().invoke(cli, args)
         assert result.exit_code == 0, result.output
         head = figure.read_bytes()[:200]

@@ -164,5 +164,6 @@ def test_multilayer_without_imu_fails_in_one_line_and_others_still_work(tmp_path
     assert "no IMU or ATT records" in line
     assert not out.exists()
     for method in ("delay1", "delay2"):
-        ok = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), "-m", method])
+        target = tmp_path / f"{method}.csv"
+        ok = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(target), "-m", method])
         assert ok.exit_code == 0, ok.output

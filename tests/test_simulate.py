@@ -31,10 +31,11 @@ def test_every_sample_log_is_what_its_command_writes(tmp_path: Path) -> None:
     assert len(COMMANDS) >= 4
     for args in COMMANDS:
         target = ROOT / args[args.index("-o") + 1]
-        args[args.index("-o") + 1] = str(tmp_path / "out.bin")
+        made = tmp_path / target.name
+        args[args.index("-o") + 1] = str(made)
         result = CliRunner().invoke(cli, args)
         assert result.exit_code == 0, result.output
-        assert (tmp_path / "out.bin").read_bytes() == target.read_bytes(), (
+        assert made.read_bytes() == target.read_bytes(), (
             f"{target.name} differs from `altfuse {' '.join(args)}`: run sample_logs/regenerate.sh"
         )
 

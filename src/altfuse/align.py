@@ -28,6 +28,8 @@ from altfuse.errors import NoUsableSensorsError, ParameterError
 from altfuse.model import FloatArray, Series
 
 SPANS = ("union", "overlap")
+#: Most ticks a clock may have (11.6 days at 10 Hz): garbage timestamps must not allocate a grid.
+MAX_TICKS = 10_000_000
 
 
 @dataclass(frozen=True)
@@ -134,6 +136,12 @@ def make_grid(series: Sequence[Series], rate_hz: float, span: str) -> FloatArray
     ends = [float(s.t.max()) for s in series]
     start, end = (min(starts), max(ends)) if span == "union" else (max(starts), min(ends))
     first, last = math.ceil(start * rate_hz - 1e-9), math.floor(end * rate_hz + 1e-9)
+    if last - first + 1 > MAX_TICKS:
+        hours = (end - start) / 3600
+        raise NoUsableSensorsError(
+            f"the altitude sources span {hours:,.1f} h: {last - first + 1:,} ticks at "
+            f"{rate_hz:g} Hz, more than {MAX_TICKS:,}; lower --rate or check the log's timestamps"
+        )
     if last < first:
         raise NoUsableSensorsError(
             "the altitude sources do not overlap in time; try --span union"

@@ -48,6 +48,7 @@ class BatchOptions:
     plot: str | None = None  # "png" or "svg"
     evaluate: bool = False
     skip_existing: bool = False
+    force: bool = False
 
     def check(self) -> None:
         self.fuse.check()
@@ -162,6 +163,12 @@ def process(job: Job, options: BatchOptions) -> LogResult:
     name = str(job.relative)
     if options.skip_existing and is_complete(job, options):
         return LogResult(name, "skipped", duration_s=time.perf_counter() - started)
+    existing = [p for p in job.outputs(options).values() if p.exists()]
+    if existing and not options.force:
+        message = (
+            f"{existing[0]} exists; --force overwrites, --skip-existing keeps complete outputs"
+        )
+        return LogResult(name, "failed", message, time.perf_counter() - started)
     try:
         prepared = prepare(read_log(job.log), options.fuse)
         run = run_method(prepared, options.fuse)

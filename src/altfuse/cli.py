@@ -33,7 +33,7 @@ from altfuse.fuse.complementary import (
 )
 from altfuse.fuse.delay import DEFAULT_Q, FORMS
 from altfuse.fuse.support import DEFAULT_BETA, DEFAULT_WINDOW
-from altfuse.info import describe
+from altfuse.info import damage, describe
 from altfuse.io import read_log
 from altfuse.metrics import ErrorStats
 from altfuse.pipeline import FuseOptions, fuse_log
@@ -193,6 +193,17 @@ def _pipeline_options(command: Callable[..., Any]) -> Callable[..., Any]:
     return command
 
 
+def _force_option(command: Callable[..., Any]) -> Callable[..., Any]:
+    return click.option("--force", is_flag=True, help="Overwrite existing outputs.")(command)
+
+
+def _refuse_existing(force: bool, *paths: Path | None) -> None:
+    """An existing output is never overwritten without --force."""
+    for path in paths:
+        if not force and path is not None and path.exists():
+            raise ParameterError(f"{path} exists; --force overwrites it")
+
+
 def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
     return click.option(
         "--plot",
@@ -263,6 +274,7 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
     help="Where to write the provenance JSON [default: beside the CSV].",
 )
 @_plot_option
+@_force_option
 def fuse(
     log: Path,
     output: Path,
@@ -270,6 +282,7 @@ def fuse(
     weights_path: Path | None,
     meta_path: Path | None,
     plot_path: Path | None,
+    force: bool,
     **options: Any,
 ) -> None:
     """Fuse the altitude sensors of LOG into one altitude, written to a CSV.
@@ -291,15 +304,13 @@ def fuse(
     for target in targets:
         if target is not None and log.exists() and target.resolve() == log.resolve():
             raise ParameterError(f"{target} is the input log; choose another output path")
+    _refuse_existing(force, *targets)
     run = fuse_log(log, opts)
     for note in run.log.notes:
         logging.getLogger("altfuse").info("%s", note)
-    if run.log.skipped_bytes:
-        logging.getLogger("altfuse").warning(
-            "%s: %d bytes were not part of any decodable record and were skipped",
-            log.name,
-            run.log.skipped_bytes,
-        )
+    warning = damage(run.log)
+    if warning:
+        logging.getLogger("altfuse").warning("%s", warning)
     extra = {}
     if plot_path is not None:
         truth = truth_or_none(run.log, run.referred)
@@ -343,6 +354,7 @@ def _stats_line(name: str, kind: str, s: ErrorStats) -> str:
 @click.option("--csv", "csv_path", type=_PATH, help="Write the report as CSV.")
 @_pipeline_options
 @_plot_option
+@_force_option
 def evaluate(
     log: Path,
     truth: str,
@@ -351,6 +363,7 @@ def evaluate(
     json_path: Path | None,
     csv_path: Path | None,
     plot_path: Path | None,
+    force: bool,
     **options: Any,
 ) -> None:
     """Measure every method, every sensor and the onboard EKF against the truth in LOG.
@@ -367,6 +380,7 @@ def evaluate(
     """
     if plot_path is not None:
         check_plot_path(plot_path)
+    _refuse_existing(force, json_path, csv_path, plot_path)
     chosen = [m.strip() for m in methods.split(",") if m.strip()]
     result = evaluate_log(log, chosen, FuseOptions(**options), truth, segments)
     t = result.prepared.referred.t
@@ -471,6 +485,7 @@ class _Progress:
     is_flag=True,
     help="Also evaluate every method on each log (metrics in the summary).",
 )
+@_force_option
 def batch(
     paths: tuple[Path, ...],
     output: Path,
@@ -482,6 +497,7 @@ def batch(
     weights: bool,
     plot_format: str | None,
     with_evaluation: bool,
+    force: bool,
     **options: Any,
 ) -> None:
     """Fuse every log under PATHS (folders searched recursively) into OUTPUT, in parallel.
@@ -504,6 +520,7 @@ def batch(
         plot=plot_format,
         evaluate=with_evaluation,
         skip_existing=skip_existing,
+        force=force,
     )
     progress = _Progress()
     results = run_batch(
@@ -565,6 +582,10 @@ def info(log: Path, as_json: bool) -> None:
         + (f"{summary['attitude']['samples']} samples" if summary["attitude"] else "none")
     )
     click.echo(f"skipped bytes: {summary['skipped_bytes']}")
+    click.echo(
+        f"dropped samples: {summary['samples_dropped_total']} (by the reader's filters and as "
+        f"implausible: {sum(summary['implausible_samples'].values())})"
+    )
     for note in summary["notes"]:
         click.echo(f"note: {note}")
 
@@ -587,8 +608,14 @@ def info(log: Path, as_json: bool) -> None:
     multiple=True,
     help="Add a fault (repeatable).",
 )
+@_force_option
 def simulate(
-    scenario: str, output: Path, seed: int, duration_s: float | None, faults: tuple[str, ...]
+    scenario: str,
+    output: Path,
+    seed: int,
+    duration_s: float | None,
+    faults: tuple[str, ...],
+    force: bool,
 ) -> None:
     """Write a simulated SCENARIO flight as a DataFlash log, with the truth in SIM records.
 
@@ -607,6 +634,7 @@ def simulate(
       altfuse simulate mission -o mission.bin --seed 1 --duration 180
       altfuse simulate hover -o hover.bin --fault gps-glitch --fault lose-baro
     """
+    _refuse_existing(force, output)
     flight = simulate_flight(scenario, seed=seed, duration_s=duration_s, faults=faults)
     n = write_simulated_log(flight, output)
     click.echo(f"{output}: {scenario}, {n} records, {flight.duration_s:g} s, seed {seed}")

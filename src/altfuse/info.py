@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from altfuse.model import FlightLog, Series
+from altfuse.screen import implausible_count
 
 #: A pause between two samples longer than this counts as a gap [s].
 GAP_S = 1.0
@@ -34,6 +35,18 @@ def describe_series(s: Series) -> dict[str, Any]:
     }
 
 
+def damage(flight: FlightLog) -> str | None:
+    """One line on what reading left out: bytes skipped, implausible samples dropped."""
+    parts = []
+    if flight.skipped_bytes:
+        parts.append(f"{flight.skipped_bytes} bytes skipped (not part of any decodable record)")
+    implausible = implausible_count(flight)
+    if implausible:
+        per = ", ".join(f"{name} {n}" for name, n in implausible.items())
+        parts.append(f"{sum(implausible.values())} implausible samples dropped ({per})")
+    return f"{Path(flight.path).name}: " + "; ".join(parts) if parts else None
+
+
 def describe(flight: FlightLog) -> dict[str, Any]:
     """A JSON-ready summary of ``flight``."""
     sensors = [describe_series(s) for s in flight.sensors]
@@ -56,6 +69,8 @@ def describe(flight: FlightLog) -> dict[str, Any]:
         if flight.attitude is None
         else {"source": flight.attitude.source, "samples": int(flight.attitude.t.size)},
         "skipped_bytes": flight.skipped_bytes,
+        "samples_dropped_total": sum(sum(s.dropped.values()) for s in flight.sensors),
+        "implausible_samples": implausible_count(flight),
         "record_counts": flight.record_counts,
         "notes": list(flight.notes),
     }

@@ -91,3 +91,4 @@ class FlightLog:
     skipped_bytes: int
     notes: tuple[str, ...] = ()
     dropped_sources: dict[str, str] = field(default_factory=dict)
+    params: dict[str, float] = field(default_factory=dict)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from altfuse.errors import LogReadError
 from altfuse.model import FlightLog
+from altfuse.screen import screen
 
 #: Every DataFlash record starts with these two bytes; the first records are FMT (type 0x80).
 DATAFLASH_FMT_HEADER = b"\xa3\x95\x80"
@@ -24,6 +25,8 @@ def sha256_of(path: Path) -> str:
 
 def read_log(path: str | Path) -> FlightLog:
     """Read a flight log, choosing the reader by the file's first bytes, not its name.
+
+    The sources are screened for impossible samples (:mod:`altfuse.screen`).
 
     Raises
     ------
@@ -50,4 +53,4 @@ def read_log(path: str | Path) -> FlightLog:
         raise LogReadError(f"{path}: not a DataFlash log (no FMT record in its first bytes)")
     from altfuse.io.dataflash import read_dataflash
 
-    return read_dataflash(path)
+    return screen(read_dataflash(path))

@@ -46,7 +46,9 @@ from altfuse.model import Attitude, FlightLog, FloatArray, Imu, Series
 log = logging.getLogger(__name__)
 
 _SENSOR_TYPES = ("GPS", "GPS2", "GPS3", "BARO", "BAR2", "BAR3", "RFND", "SONR", "CTUN")
-_OTHER_TYPES = ("IMU", "ATT", "XKF1", "NKF1", "ORGN", "AHR2", "POS", "SIM", "MSG", "VER", "FMTU")
+_OTHER_TYPES = (
+    "IMU", "ATT", "XKF1", "NKF1", "ORGN", "AHR2", "POS", "SIM", "MSG", "VER", "FMTU", "PARM",
+)  # fmt: skip
 WANTED_TYPES = frozenset(_SENSOR_TYPES + _OTHER_TYPES)
 
 #: Format characters whose scale pymavlink applies itself.
@@ -489,7 +491,14 @@ def read_dataflash(path: str | Path) -> FlightLog:
         skipped_bytes=skipped,
         notes=tuple(b.notes),
         dropped_sources=b.dropped_sources,
+        params=_params(rec),
     )
+
+
+def _params(rec: _Records) -> dict[str, float]:
+    if not rec.has("PARM", "Name", "Value"):
+        return {}
+    return dict(zip(rec.text("PARM", "Name"), rec.raw("PARM", "Value").tolist(), strict=True))
 
 
 def _sensor_order(name: str) -> tuple[int, str]:

@@ -1,0 +1,161 @@
+"""Plausibility screening: impossible samples are dropped before alignment, counted by reason.
+
+Real logs carry records no sensor can have produced (seen in public logs: a GPS record with
+Status 6 and an altitude of 15,647,421 m, timestamps jumping by hours, a rangefinder reporting its
+maximum whenever out of range, baro spikes). The reader's own filters (GPS Status, BARO health,
+RFND Stat) come first; these checks come after, on each source:
+
+- **time out of order**: a sample far (``max(1 s, 10 median steps)``) from the running median of
+  its neighbours' times, or earlier than a sample logged before it (a lone stamp hours ahead
+  would otherwise make every later sample look "backwards");
+- **time far outside the log**: more than ``max(600 s, half the bulk's length)`` outside the span
+  of the middle 98 % of all the sources' samples;
+- **outside the plausible altitude envelope**: GPS outside -500..12,000 m AMSL, barometer outside
+  -1,000..12,000 m, rangefinder outside 0..1,000 m;
+- **rangefinder out-of-range codes**: exactly 0 or 655.35 m (the uint16 centimetre maximum);
+- **rangefinder pinned at its maximum**: drivers that log their maximum range (or max + 1 m) when
+  they see nothing, with ``Stat`` Good: when the log holds ``RNGFND1_MAX_CM``/``RNGFND_MAX_CM``,
+  samples at or above that maximum; otherwise samples equal to the series' own maximum when that
+  value repeats in at least ``PINNED_MIN_SAMPLES`` samples;
+- **spikes**: a sample more than ``SPIKE_MIN_M`` away from both neighbours, in the same direction,
+  and faster than ``MAX_VERTICAL_SPEED_M_S`` to reach from either: no aircraft does that.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from altfuse.model import FlightLog, FloatArray, Series
+
+Mask = npt.NDArray[np.bool_]
+
+BACKWARDS = "time out of order"
+OUTSIDE_LOG = "time far outside the log"
+ENVELOPE = "outside the plausible altitude envelope"
+CODE = "rangefinder out-of-range code (0 or 655.35 m)"
+PINNED = "rangefinder pinned at its maximum"
+SPIKE = "spike (faster than 50 m/s to both neighbours)"
+REASONS = (BACKWARDS, OUTSIDE_LOG, ENVELOPE, CODE, PINNED, SPIKE)
+
+ENVELOPE_M = {
+    "gps": (-500.0, 12_000.0),
+    "baro": (-1_000.0, 12_000.0),
+    "rangefinder": (0.0, 1_000.0),
+}
+RANGEFINDER_CODES_M = (0.0, 655.35)
+PINNED_MIN_SAMPLES = 10
+SPIKE_MIN_M = 10.0
+MAX_VERTICAL_SPEED_M_S = 50.0
+TIME_MARGIN_MIN_S = 600.0
+RANGEFINDER_MAX_PARAMS = ("RNGFND1_MAX_CM", "RNGFND_MAX_CM")
+
+
+def log_span(series: tuple[Series, ...]) -> tuple[float, float] | None:
+    """The span of the bulk of all samples, widened by the far-outside margin."""
+    times = np.concatenate([s.t for s in series]) if series else np.zeros(0)
+    times = times[np.isfinite(times)]
+    if times.size < 10:
+        return None
+    lo, hi = np.percentile(times, [1.0, 99.0])
+    margin = max(TIME_MARGIN_MIN_S, 0.5 * (hi - lo))
+    return float(lo - margin), float(hi + margin)
+
+
+def _out_of_order(t: FloatArray) -> Mask:
+    """Lone stamps far from their neighbours', then samples earlier than one logged before."""
+    out = np.zeros(t.size, dtype=bool)
+    if t.size >= 5:
+        step = float(np.median(np.abs(np.diff(t))))
+        local = pd.Series(t).rolling(5, center=True, min_periods=1).median().to_numpy()
+        out = np.abs(t - local) > max(1.0, 10.0 * step)
+    kept = np.flatnonzero(~out)
+    earlier = np.maximum.accumulate(np.concatenate(([-np.inf], t[kept][:-1])))
+    out[kept[t[kept] < earlier]] = True
+    return out
+
+
+def _spikes(t: FloatArray, v: FloatArray) -> Mask:
+    out = np.zeros(v.size, dtype=bool)
+    if v.size < 3:
+        return out
+    d_prev, d_next = v[1:-1] - v[:-2], v[1:-1] - v[2:]
+    dt_prev = np.maximum(t[1:-1] - t[:-2], 1e-3)
+    dt_next = np.maximum(t[2:] - t[1:-1], 1e-3)
+    far = (np.abs(d_prev) > SPIKE_MIN_M) & (np.abs(d_next) > SPIKE_MIN_M)
+    fast = (np.abs(d_prev) / dt_prev > MAX_VERTICAL_SPEED_M_S) & (
+        np.abs(d_next) / dt_next > MAX_VERTICAL_SPEED_M_S
+    )
+    out[1:-1] = far & fast & (np.sign(d_prev) == np.sign(d_next))
+    return out
+
+
+def _pinned(v: FloatArray, configured_max_m: float | None) -> Mask:
+    if configured_max_m is not None:
+        out: Mask = v >= configured_max_m - 0.005
+        return out
+    top = np.max(v) if v.size else 0.0
+    at_top = np.isclose(v, top, rtol=0.0, atol=0.005)
+    return at_top if at_top.sum() >= PINNED_MIN_SAMPLES else np.zeros(v.size, dtype=bool)
+
+
+def screen_series(
+    s: Series, span: tuple[float, float] | None, rangefinder_max_m: float | None = None
+) -> Series:
+    """``s`` without its impossible samples; ``dropped`` counts them by reason."""
+    checks: list[tuple[str, Mask]] = []
+    if span is not None:
+        checks.append((OUTSIDE_LOG, (s.t < span[0]) | (s.t > span[1])))
+    checks.append((BACKWARDS, _out_of_order(s.t)))
+    lo, hi = ENVELOPE_M.get(s.kind, (-np.inf, np.inf))
+    checks.append((ENVELOPE, (s.value < lo) | (s.value > hi)))
+    if s.kind == "rangefinder":
+        checks.append((CODE, np.isin(np.round(s.value, 2), RANGEFINDER_CODES_M)))
+    keep = np.ones(s.t.size, dtype=bool)
+    dropped = dict(s.dropped)
+    for reason, bad in checks:
+        hit = keep & bad
+        if hit.any():
+            dropped[reason] = dropped.get(reason, 0) + int(hit.sum())
+        keep &= ~bad
+    # the checks that look at the shape of the samples left
+    later: list[tuple[str, Mask]] = []
+    if s.kind == "rangefinder" and keep.any():
+        later.append((PINNED, _pinned(s.value[keep], rangefinder_max_m)))
+    for reason, bad_among_kept in later:
+        idx = np.flatnonzero(keep)[bad_among_kept]
+        if idx.size:
+            dropped[reason] = dropped.get(reason, 0) + int(idx.size)
+            keep[idx] = False
+    spikes = np.flatnonzero(keep)[_spikes(s.t[keep], s.value[keep])]
+    if spikes.size:
+        dropped[SPIKE] = int(spikes.size)
+        keep[spikes] = False
+    if keep.all():
+        return s
+    return replace(s, t=s.t[keep], value=s.value[keep], dropped=dropped)
+
+
+def screen(flight: FlightLog) -> FlightLog:
+    """``flight`` with every source screened (see the module doc); empty sources dropped."""
+    span = log_span(flight.sensors)
+    max_cm = next((flight.params[p] for p in RANGEFINDER_MAX_PARAMS if p in flight.params), None)
+    rangefinder_max_m = max_cm / 100.0 if max_cm and max_cm > 0 else None
+    sensors, dropped_sources = [], dict(flight.dropped_sources)
+    for s in flight.sensors:
+        screened = screen_series(s, span, rangefinder_max_m)
+        if screened.t.size:
+            sensors.append(screened)
+        else:
+            reasons = ", ".join(f"{n} {r}" for r, n in screened.dropped.items())
+            dropped_sources[s.name] = f"{s.source}: no plausible sample ({reasons})"
+    return replace(flight, sensors=tuple(sensors), dropped_sources=dropped_sources)
+
+
+def implausible_count(flight: FlightLog) -> dict[str, int]:
+    """Samples dropped by screening, per source (the reader's own filters excluded)."""
+    counts = {s.name: sum(n for r, n in s.dropped.items() if r in REASONS) for s in flight.sensors}
+    return {name: n for name, n in counts.items() if n}

@@ -1,0 +1,163 @@
+"""Hostile input: impossible samples are dropped and counted; outputs are never clobbered."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from altfuse.align import MAX_TICKS, align
+from altfuse.cli import cli
+from altfuse.errors import NoUsableSensorsError
+from altfuse.model import Series
+from altfuse.screen import (
+    BACKWARDS,
+    CODE,
+    ENVELOPE,
+    OUTSIDE_LOG,
+    PINNED,
+    SPIKE,
+    log_span,
+    screen_series,
+)  # fmt: skip
+from altfuse.simulate import SimulatedFlight, simulate_flight, write_simulated_log
+from conftest import SAMPLE_LOG, ardupilot_logs, shared_log
+
+
+def series(kind: str, t: np.ndarray, v: np.ndarray) -> Series:
+    return Series(kind, kind, f"{kind}.Alt", "test", t.astype(float), v.astype(float))
+
+
+def test_each_check_drops_and_counts() -> None:
+    t = np.arange(100) * 0.2
+    v = 100.0 + np.sin(t)
+    v[10] = 15_647_421.0  # the GPS pattern seen in a public log
+    v[20] = 160.0  # a one-sample spike: 60 m in 0.2 s and back
+    t[30] = 2.0  # time running backwards
+    t[40] = 90_000.0  # far outside the log
+    out = screen_series(series("gps", t, v), log_span((series("gps", t, v),)))
+    assert out.dropped == {BACKWARDS: 1, OUTSIDE_LOG: 1, ENVELOPE: 1, SPIKE: 1}
+    assert out.t.size == 96
+    assert np.all(np.diff(out.t) > 0)
+
+
+def test_rangefinder_codes_and_pinned_maximum() -> None:
+    t = np.arange(200) * 0.05
+    v = 3.0 + 0.1 * np.sin(t)
+    v[5] = 0.0
+    v[6] = 655.35
+    v[100:130] = 7.0  # pinned at its maximum while out of range
+    out = screen_series(series("rangefinder", t, v), None)
+    assert out.dropped == {CODE: 2, PINNED: 30}
+    # with the configured maximum from the log's parameters (RNGFND1_MAX_CM 700)
+    v[50] = 8.0  # max + 1 m
+    out = screen_series(series("rangefinder", t, v), None, rangefinder_max_m=7.0)
+    assert out.dropped == {CODE: 2, PINNED: 31}
+    # a maximum reached a few times in flight is not "pinned"
+    w = 3.0 + np.sin(t)
+    assert screen_series(series("rangefinder", t, w), None).dropped == {}
+
+
+def _variant(sim: SimulatedFlight, type_name: str, index: int, values: tuple[object, ...] | None):
+    """A copy of ``sim`` with record ``index`` of ``type_name`` replaced, or removed (None)."""
+    records = {k: list(v) for k, v in sim.records.items()}
+    t, _ = records[type_name][index]
+    if values is None:
+        del records[type_name][index]
+    else:
+        records[type_name][index] = (t, values)
+    return SimulatedFlight(sim.scenario, sim.seed, sim.duration_s, sim.faults, sim.profile, records)
+
+
+def _fused(sim: SimulatedFlight, path: Path) -> tuple[pd.DataFrame, dict[str, object]]:
+    write_simulated_log(sim, path)
+    out = path.with_suffix(".csv")
+    result = CliRunner().invoke(cli, ["fuse", str(path), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    meta = json.loads(out.with_suffix(".meta.json").read_text())
+    return pd.read_csv(out), meta
+
+
+def test_a_15_million_metre_gps_record_is_rejected_and_moves_nothing(tmp_path: Path) -> None:
+    sim = simulate_flight("mission", seed=4)
+    i = 300  # mid-flight
+    _, good = sim.records["GPS"][i]
+    bad = list(good)
+    bad[1], bad[8] = 6, 15_647_421.0  # Status 6 (RTK fixed), the altitude seen in a public log
+    dirty, meta = _fused(_variant(sim, "GPS", i, tuple(bad)), tmp_path / "dirty.bin")
+    clean, _ = _fused(_variant(sim, "GPS", i, None), tmp_path / "clean.bin")
+    gps = next(s for s in meta["sensors_used"] if s["name"] == "gps")
+    assert gps["samples_dropped"][ENVELOPE] == 1
+    pd.testing.assert_frame_equal(dirty, clean)
+
+
+def test_a_rangefinder_pinned_at_its_maximum_is_rejected_and_moves_nothing(tmp_path: Path) -> None:
+    sim = simulate_flight("hover", seed=4)  # climbs past the rangefinder's 40 m maximum
+    rfnd = sim.records["RFND"]
+    # a driver that reports Good while pinned at its maximum (4000 cm)
+    pinned = [i for i, (_, v) in enumerate(rfnd) if v[2] == 3]
+    liar = {k: list(v) for k, v in sim.records.items()}
+    liar["RFND"] = [(t, (v[0], v[1], 4, v[3])) if v[2] == 3 else (t, v) for t, v in rfnd]
+    honest = {k: list(v) for k, v in sim.records.items()}
+    honest["RFND"] = [(t, v) for t, v in rfnd if v[2] != 3]
+    make = lambda r: SimulatedFlight(sim.scenario, sim.seed, sim.duration_s, (), sim.profile, r)  # noqa: E731
+    dirty, meta = _fused(make(liar), tmp_path / "dirty.bin")
+    clean, _ = _fused(make(honest), tmp_path / "clean.bin")
+    used = next(s for s in meta["sensors_used"] if s["name"] == "rangefinder")
+    assert used["samples_dropped"][PINNED] == len(pinned)
+    assert len(pinned) > 2000
+    pd.testing.assert_frame_equal(dirty, clean)
+
+
+@pytest.mark.parametrize("name", ardupilot_logs() or ["(shared logs missing)"])
+def test_info_reports_skipped_bytes_and_dropped_samples(name: str) -> None:
+    result = CliRunner().invoke(cli, ["info", str(shared_log(f"ardupilot/{name}"))])
+    if name == "hatemslah_demo-flight.bin":
+        assert result.exit_code == 0  # info describes even a log with nothing to fuse
+    assert "skipped bytes: " in result.stdout
+    assert "dropped samples: " in result.stdout
+    data = json.loads(
+        CliRunner().invoke(cli, ["info", str(shared_log(f"ardupilot/{name}")), "--json"]).stdout
+    )
+    assert data["skipped_bytes"] >= 0
+    assert data["samples_dropped_total"] == sum(
+        sum(s["samples_dropped"].values()) for s in data["sensors"]
+    )
+
+
+def test_garbage_timestamps_cannot_allocate_a_huge_clock() -> None:
+    t = np.concatenate([np.arange(100) * 0.1, [4e6]])  # one sample 46 days later
+    s = series("baro", t, np.ones(t.size))
+    with pytest.raises(NoUsableSensorsError, match=f"more than {MAX_TICKS:,}"):
+        align([s], rate_hz=10.0)
+
+
+@pytest.mark.parametrize("command", ["fuse", "evaluate", "simulate"])
+def test_existing_outputs_are_not_overwritten_without_force(tmp_path: Path, command: str) -> None:
+    out = tmp_path / "out.csv"
+    out.write_text("precious")
+    args = {
+        "fuse": ["fuse", str(SAMPLE_LOG), "-o", str(out)],
+        "evaluate": ["evaluate", str(SAMPLE_LOG), "--csv", str(out)],
+        "simulate": ["simulate", "mission", "-o", str(out)],
+    }[command]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 2
+    assert result.stderr.strip() == f"altfuse: error: {out} exists; --force overwrites it"
+    assert out.read_text() == "precious"
+    forced = CliRunner().invoke(cli, [*args, "--force"])
+    assert forced.exit_code == 0, forced.output
+    assert out.read_bytes() != b"precious"
+
+
+def test_the_input_is_opened_read_only(tmp_path: Path) -> None:
+    log = tmp_path / "ro.bin"
+    log.write_bytes(SAMPLE_LOG.read_bytes())
+    log.chmod(0o444)
+    result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(tmp_path / "o.csv")])
+    assert result.exit_code == 0, result.output
+    assert log.read_bytes() == SAMPLE_LOG.read_bytes()
