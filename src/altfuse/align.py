@@ -86,6 +86,8 @@ def cell_means(t: FloatArray, v: FloatArray, rate_hz: float) -> tuple[FloatArray
     Returns the mean time and mean value of every non-empty cell; a sensor slower than the clock
     comes back unchanged.
     """
+    if t.size == 0:
+        return t, v
     cell = np.floor(t * rate_hz + 0.5).astype(np.int64)
     boundaries = np.flatnonzero(np.diff(cell)) + 1
     if boundaries.size == t.size - 1:

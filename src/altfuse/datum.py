@@ -157,17 +157,19 @@ def refer_to_takeoff(aligned: Aligned, ground_s: float = 5.0, climb_m: float = 1
     ref = choose_reference(aligned)
     ref_valid = np.isfinite(z[:, ref])
     takeoff = detect_takeoff(t, z[:, ref], aligned.rate_hz, ground_s, climb_m)
-    if takeoff is not None and t[ref_valid][0] < takeoff - TAKEOFF_MARGIN_S:
+    window = np.zeros(t.size, dtype=bool)
+    if takeoff is None:
+        ground_how = "first seconds of the log (no take-off found)"
+    elif t[ref_valid][0] >= takeoff - TAKEOFF_MARGIN_S:
+        ground_how = "first seconds of the log (take-off too early for a ground window)"
+    else:
         end = takeoff - TAKEOFF_MARGIN_S
         window = (t >= end - ground_s) & (t <= end)
         ground_how = f"ground before take-off at {takeoff:.1f} s"
-    else:
+        if not (window & ref_valid).any():
+            ground_how = "first seconds of the log (no reference sample before take-off)"
+    if not (window & ref_valid).any():
         window = _first_seconds(ref_valid, t, ground_s)
-        ground_how = (
-            "first seconds of the log (no take-off found)"
-            if takeoff is None
-            else "first seconds of the log (take-off too early for a ground window)"
-        )
     win_idx = np.flatnonzero(window & ref_valid)
     ground_window = (float(t[win_idx[0]]), float(t[win_idx[-1]]))
 

@@ -79,7 +79,8 @@ _VEHICLE_OF = {
 def _scaled(values: npt.NDArray[Any], char: str) -> FloatArray:
     """A numeric field as pymavlink gives it: the legacy format scales divided out as it does."""
     scale = FORMAT_TO_STRUCT[char][1]
-    out: FloatArray = values.astype(np.float64)
+    with np.errstate(invalid="ignore"):  # damaged bytes can hold signalling NaNs
+        out: FloatArray = values.astype(np.float64)
     if scale is not None:
         # pymavlink divides by 1/scale (more exact for 0.01 and 1e-7 than multiplying)
         out = out / (1 / scale) if 0.0 < scale < 1.0 else out * scale
@@ -123,6 +124,12 @@ class _Records:
     def has(self, type_name: str, *fields: str) -> bool:
         fmt = self.formats.get(type_name)
         return fmt is not None and self.n(type_name) > 0 and all(f in fmt.columns for f in fields)
+
+    def timed(self, type_name: str, *fields: str) -> bool:
+        """:meth:`has`, and the type has a time field (damage can rename it in its FMT)."""
+        return self.has(type_name, *fields) and (
+            self.has(type_name, "TimeUS") or self.has(type_name, "TimeMS")
+        )
 
     def raw(self, type_name: str, col: str) -> FloatArray:
         """A numeric field as pymavlink decodes it (legacy format scales applied)."""
@@ -261,7 +268,7 @@ def _add_instances(
 
 def _read_gps(b: _Builder) -> None:
     for default, type_name in enumerate(("GPS", "GPS2", "GPS3")):
-        if not b.rec.has(type_name, "Alt", "Status"):
+        if not b.rec.timed(type_name, "Alt", "Status"):
             continue
         no_fix = b.rec.raw(type_name, "Status") < 3
         _add_instances(
@@ -279,7 +286,7 @@ def _read_gps(b: _Builder) -> None:
 def _read_baro(b: _Builder) -> bool:
     found = False
     for default, type_name in enumerate(("BARO", "BAR2", "BAR3")):
-        if not b.rec.has(type_name, "Alt"):
+        if not b.rec.timed(type_name, "Alt"):
             continue
         found = True
         invalid = {}
@@ -309,7 +316,7 @@ def _rangefinder_invalid(b: _Builder, type_name: str, dist: str, stat: str) -> d
 def _read_rangefinder(b: _Builder) -> bool:
     found = False
     rfnd = "RFND"
-    if b.rec.has(rfnd, "Dist"):
+    if b.rec.timed(rfnd, "Dist"):
         found = True
         _add_instances(
             b,
@@ -324,7 +331,7 @@ def _read_rangefinder(b: _Builder) -> bool:
     elif b.rec.n(rfnd):
         for inst in (0, 1):
             dist = f"Dist{inst + 1}"
-            if not b.rec.has(rfnd, dist):
+            if not b.rec.timed(rfnd, dist):
                 continue
             found = True
             b.add(
@@ -337,7 +344,7 @@ def _read_rangefinder(b: _Builder) -> bool:
                 invalid=_rangefinder_invalid(b, rfnd, dist, f"Stat{inst + 1}"),
             )
     for col in ("Dist", "DistCM"):
-        if not found and b.rec.has("SONR", col):
+        if not found and b.rec.timed("SONR", col):
             found = True
             b.add(
                 name="rangefinder",
@@ -357,7 +364,7 @@ def _read_ctun_fallbacks(b: _Builder, have_baro: bool, have_rangefinder: bool) -
     everything = np.ones(b.rec.n("CTUN"), dtype=bool)
     if not have_baro:
         for col in ("BAlt", "BarAlt"):
-            if b.rec.has("CTUN", col):
+            if b.rec.timed("CTUN", col):
                 b.add(
                     name="baro",
                     kind="baro",
@@ -370,7 +377,7 @@ def _read_ctun_fallbacks(b: _Builder, have_baro: bool, have_rangefinder: bool) -
                 break
     if not have_rangefinder:
         for col in ("SAlt", "SonAlt"):
-            if not b.rec.has("CTUN", col):
+            if not b.rec.timed("CTUN", col):
                 continue
             values = b.rec.column("CTUN", col)
             if not np.any(values[np.isfinite(values)] != 0):
@@ -392,7 +399,7 @@ def _read_ctun_fallbacks(b: _Builder, have_baro: bool, have_rangefinder: bool) -
 def _reference(
     rec: _Records, name: str, type_name: str, col: str, datum: str, sign: float = 1.0
 ) -> Series | None:
-    if not rec.has(type_name, col):
+    if not rec.timed(type_name, col):
         return None
     select = np.ones(rec.n(type_name), dtype=bool)
     if rec.has(type_name, "C"):  # EKF3 logs one record per core: take core 0
@@ -407,7 +414,7 @@ def _reference(
 
 
 def _ekf_origin(rec: _Records) -> float | None:
-    if not rec.has("ORGN", "Alt", "Type"):
+    if not rec.timed("ORGN", "Alt", "Type"):
         return None
     kind = rec.raw("ORGN", "Type")
     alt = rec.column("ORGN", "Alt")[kind == 0]
@@ -429,7 +436,7 @@ def _read_references(rec: _Records) -> list[Series]:
 
 
 def _read_imu(rec: _Records) -> Imu | None:
-    if not rec.has("IMU", "AccX", "AccY", "AccZ"):
+    if not rec.timed("IMU", "AccX", "AccY", "AccZ"):
         return None
     select = np.ones(rec.n("IMU"), dtype=bool)
     if rec.has("IMU", "I"):
@@ -439,7 +446,7 @@ def _read_imu(rec: _Records) -> Imu | None:
 
 
 def _read_attitude(rec: _Records) -> Attitude | None:
-    if not rec.has("ATT", "Roll", "Pitch", "Yaw"):
+    if not rec.timed("ATT", "Roll", "Pitch", "Yaw"):
         return None
     angles = [np.deg2rad(rec.column("ATT", c)) for c in ("Roll", "Pitch", "Yaw")]
     return Attitude("ATT", rec.times("ATT"), *angles)

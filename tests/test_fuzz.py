@@ -1,0 +1,56 @@
+"""Property: a damaged log gives a valid output or the documented one-line error, never a crash.
+
+Derandomised so that CI is reproducible; tests/fuzz_long.py runs thousands of random variants.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+from click.testing import CliRunner
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from altfuse.cli import cli
+from conftest import ROOT, SHARED_LOGS
+from fuzzing import MUTATIONS, Records, variant
+
+BASES = [ROOT / "sample_logs" / "paper_a.bin"] + [
+    p
+    for p in (SHARED_LOGS / "ardupilot" / n for n in ("pymavlink_test.BIN", "spark404_log.bin"))
+    if p.exists()
+]
+_CACHE: dict[Path, tuple[bytes, Records]] = {}
+
+
+def base(path: Path) -> tuple[bytes, Records]:
+    if path not in _CACHE:
+        _CACHE[path] = (path.read_bytes(), Records(path))
+    return _CACHE[path]
+
+
+@settings(
+    max_examples=40, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
+@given(
+    which=st.sampled_from(BASES),
+    names=st.lists(st.sampled_from(sorted(MUTATIONS)), min_size=1, max_size=3),
+    seed=st.integers(0, 2**32 - 1),
+    method=st.sampled_from(["support", "multilayer", "delay2"]),
+)
+def test_damaged_logs_never_crash(which: Path, names: list[str], seed: int, method: str) -> None:
+    data, records = base(which)
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(tmp) / "damaged.bin"
+        log.write_bytes(variant(data, records, names, seed))
+        out = Path(tmp) / "out.csv"
+        result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), "-m", method])
+        assert result.exit_code in (0, 1), (names, seed, result.output)
+        if result.exit_code == 0:
+            assert len(pd.read_csv(out)) > 0
+        else:
+            assert result.stderr.count("\n") == 1
+            assert result.stderr.startswith("altfuse: error: ")
+            assert not out.exists()
