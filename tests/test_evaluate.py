@@ -52,6 +52,7 @@ def test_simulated_log_is_measured_against_the_sim_truth() -> None:
         "delay1": "method",
         "delay2": "method",
         "multilayer": "method",
+        "smoother": "method",
         "gps": "sensor",
         "baro": "sensor",
         "rangefinder": "sensor",

@@ -14,8 +14,19 @@ METHODS = sorted(FUSERS)
 
 
 def call(method: str, z: np.ndarray) -> FusionResult:
-    """Run ``method``, giving it the log inputs it asks for: no acceleration, a 10 Hz clock."""
-    inputs = {"accel_up": np.zeros(z.shape[0]), "dt_s": 0.1}
+    """Run ``method``, giving it the log inputs it asks for: no acceleration, a 10 Hz clock, the
+    clock's values as each sensor's samples."""
+    t = np.arange(z.shape[0]) * 0.1
+    n = z.shape[1]
+    inputs = {
+        "accel_up": np.zeros(z.shape[0]),
+        "dt_s": 0.1,
+        "accel": None,
+        "t": t,
+        "samples": [(t[np.isfinite(z[:, i])], z[np.isfinite(z[:, i]), i]) for i in range(n)],
+        "kinds": ("gps", "baro", "rangefinder")[:n],
+        "names": ("gps", "baro", "rangefinder")[:n],
+    }
     wanted = set(inspect.signature(FUSERS[method]).parameters) & LOG_INPUTS
     return FUSERS[method](z, **{k: inputs[k] for k in wanted})
 

@@ -32,6 +32,7 @@ from altfuse.fuse.complementary import (
     DEFAULT_T_S,
 )
 from altfuse.fuse.delay import DEFAULT_Q, FORMS
+from altfuse.fuse.smoother import DEFAULT_GATE, Q_ACCEL, Q_ACCEL_NO_IMU
 from altfuse.fuse.support import DEFAULT_BETA, DEFAULT_WINDOW
 from altfuse.info import damage, describe
 from altfuse.io import read_log
@@ -43,7 +44,10 @@ from altfuse.write import atomic_outputs, default_meta_path, write_json, write_o
 
 EXIT_BUG = 3
 #: Options that are parameters of a fusion method (passed on only when given).
-METHOD_OPTIONS = ("alpha", "beta", "window", "form", "q", "time_constant", "e_max", "reopen")
+METHOD_OPTIONS = (
+    "alpha", "beta", "window", "form", "q", "time_constant", "e_max", "reopen", "gate",
+    "accel_noise", "sigmas",
+)  # fmt: skip
 
 
 class _OneLineFormatter(logging.Formatter):
@@ -204,6 +208,19 @@ def _refuse_existing(force: bool, *paths: Path | None) -> None:
             raise ParameterError(f"{path} exists; --force overwrites it")
 
 
+def _parse_sigmas(values: tuple[str, ...]) -> dict[str, float] | None:
+    if not values:
+        return None
+    out = {}
+    for item in values:
+        name, _, number = item.partition("=")
+        try:
+            out[name.strip()] = float(number)
+        except ValueError:
+            raise click.BadParameter(f"{item!r} is not NAME=METRES", param_hint="--sigma") from None
+    return out
+
+
 def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
     return click.option(
         "--plot",
@@ -261,6 +278,21 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
     float,
     f"multilayer: seconds before a shut gate reopens [default {DEFAULT_REOPEN_S:g}].",
 )
+@_method_option("--gate", float, f"smoother: innovation gate [sigmas] [default {DEFAULT_GATE:g}].")
+@_method_option(
+    "--accel-noise",
+    float,
+    "smoother: white acceleration noise density [m^2/s^3] "
+    f"[default {Q_ACCEL:g}, {Q_ACCEL_NO_IMU:g} without IMU].",
+)
+@click.option(
+    "--sigma",
+    "sigmas",
+    multiple=True,
+    callback=lambda _ctx, _param, value: _parse_sigmas(value),
+    help="smoother: a sensor's measurement noise, NAME=METRES (repeatable) [default: from the "
+    "log].",
+)
 @click.option(
     "--weights",
     "weights_path",
@@ -293,6 +325,7 @@ def fuse(
       altfuse fuse flight.bin -o flight.csv --method mean --rate 20
       altfuse fuse flight.bin -o flight.csv --alpha 0.5 --beta 10 --weights w.csv
       altfuse fuse flight.bin -o flight.csv --method multilayer --plot flight.png
+      altfuse fuse flight.bin -o flight.csv --method smoother --sigma gps=0.8
     """
     params = {k: options.pop(k) for k in METHOD_OPTIONS}
     params = {k: v for k, v in params.items() if v is not None}

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from altfuse import __version__
-from altfuse.align import Aligned, align, check_align_parameters
+from altfuse.align import Aligned, align, check_align_parameters, merge_duplicates
 from altfuse.datum import Referred, check_datum_parameters, refer_to_takeoff, tilt_correct
 from altfuse.errors import NoUsableSensorsError, ParameterError, UnsupportedLogError
 from altfuse.fuse import FUSERS, LOG_INPUTS, FusionResult
@@ -129,10 +129,18 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
     fuser = FUSERS[options.method]
     inputs: dict[str, Any] = {}
     wanted = _params(fuser)
+    accel_record: dict[str, Any] | None = None
     if "accel_up" in wanted:
         inputs["accel_up"], accel_record = accel_on_clock(flight, referred, options)
+    if "accel" in wanted:
+        inputs["accel"], accel_record = accel_samples(flight, referred, options)
     if "dt_s" in wanted:
         inputs["dt_s"] = 1.0 / options.rate_hz
+    if "samples" in wanted:
+        inputs["samples"] = referred_samples(prepared)
+    for name, value in (("t", referred.t), ("kinds", referred.kinds), ("names", referred.names)):
+        if name in wanted:
+            inputs[name] = value
     started = time.perf_counter()
     result = fuser(referred.h, **inputs, **options.params)
     log.info(
@@ -143,7 +151,7 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
     )
     record = provenance(prepared, result)
     record["options"] = asdict(options)
-    if "accel_up" in inputs:
+    if accel_record is not None:
         record["vertical_acceleration"] = accel_record
     return FuseRun(
         log=flight,
@@ -183,6 +191,29 @@ def accel_on_clock(
         "ticks_without_imu": int((~np.isfinite(a_clock)).sum()),
     }
     return a_clock - bias, record
+
+
+def accel_samples(
+    flight: FlightLog, referred: Referred, options: FuseOptions
+) -> tuple[tuple[FloatArray, FloatArray] | None, dict[str, Any]]:
+    """The vertical acceleration samples less the at-rest reading of :func:`accel_on_clock`, or
+    None (and the record says so) when the log has no IMU or ATT."""
+    if flight.imu is None or flight.attitude is None:
+        return None, {"source": None, "note": "no IMU or ATT records: altitude-only model"}
+    _, record = accel_on_clock(flight, referred, options)
+    t, a = vertical_acceleration(flight.imu, flight.attitude)
+    return (t, a - record["at_rest_bias_m_s2"]), record
+
+
+def referred_samples(prepared: Prepared) -> list[tuple[FloatArray, FloatArray]]:
+    """Each fused sensor's own samples (time, height above take-off), in the clock's order."""
+    by_name = {s.name: s for s in prepared.sensors}
+    out = []
+    for o in prepared.referred.offsets:
+        s = by_name[o.name]
+        t, v = merge_duplicates(s.t, s.value - o.offset_m)
+        out.append((t, v))
+    return out
 
 
 def _params(fuser: Any) -> set[str]:

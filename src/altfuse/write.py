@@ -26,7 +26,8 @@ def fused_table(run: FuseRun) -> pd.DataFrame:
     """One row per tick: time, each sensor's referred height, the fused height, weights, support.
 
     Columns: ``time_s``; ``alt_<sensor>_m`` for each sensor (height above take-off);
-    ``fused_alt_m``; ``status`` (``fused``/``equal``/``single``/``none``); ``n_sensors``;
+    ``fused_alt_m``; ``fused_std_m`` (its standard deviation, where the method gives one);
+    ``status`` (``fused``/``equal``/``single``/``none``); ``n_sensors``;
     ``weight_<sensor>`` (summing to 1); ``support_<sensor>`` (Paper A's r_i, where the method
     computes it).
     """
@@ -35,6 +36,8 @@ def fused_table(run: FuseRun) -> pd.DataFrame:
     for i, name in enumerate(ref.names):
         columns[f"alt_{name}_m"] = ref.h[:, i]
     columns["fused_alt_m"] = res.fused
+    if "fused_std" in res.tick_traces:
+        columns["fused_std_m"] = res.tick_traces["fused_std"]
     columns["status"] = res.status
     columns["n_sensors"] = np.isfinite(ref.h).sum(axis=1)
     for i, name in enumerate(ref.names):

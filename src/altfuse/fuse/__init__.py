@@ -14,6 +14,7 @@ from altfuse.fuse.base import FusionResult
 from altfuse.fuse.complementary import fuse_multilayer
 from altfuse.fuse.delay import fuse_delay1, fuse_delay2
 from altfuse.fuse.mean import fuse_mean
+from altfuse.fuse.smoother import fuse_smoother
 from altfuse.fuse.support import fuse_support
 
 FUSERS: dict[str, Callable[..., FusionResult]] = {
@@ -22,10 +23,13 @@ FUSERS: dict[str, Callable[..., FusionResult]] = {
     "delay1": fuse_delay1,
     "delay2": fuse_delay2,
     "multilayer": fuse_multilayer,
+    "smoother": fuse_smoother,
 }
 
-#: Keyword arguments a fuser may take that come from the log, not from the user:
-#: the earth-frame vertical acceleration on the clock [m/s²] and the clock's tick [s].
-LOG_INPUTS = frozenset({"accel_up", "dt_s"})
+#: Keyword arguments a fuser may take that come from the log, not from the user: the earth-frame
+#: vertical acceleration on the clock [m/s²] (accel_up) or as samples (accel: times, values; None
+#: without IMU/ATT), the clock's tick [s] (dt_s) and times (t), and each sensor's own referred
+#: samples (samples), kinds and names.
+LOG_INPUTS = frozenset({"accel_up", "dt_s", "accel", "t", "samples", "kinds", "names"})
 
 __all__ = ["FUSERS", "LOG_INPUTS", "FusionResult"]

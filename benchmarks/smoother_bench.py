@@ -1,0 +1,64 @@
+"""Time of the smoother against flight length: is it linear? (issue 8, acceptance 3)
+
+Run on demand:  python benchmarks/smoother_bench.py [--minutes 10 30 60]
+
+A synthetic flight (a slow climb-and-hover profile) with GPS at 5 Hz, barometer and rangefinder at
+20 Hz, the IMU at 400 Hz and the report clock at 10 Hz, fed straight to ``fuse_smoother`` (no log
+file: this measures the method, not the reader). Prints the wall time per flight length and per
+event.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from altfuse.fuse.smoother import fuse_smoother
+
+
+def flight(minutes: float, seed: int = 0) -> dict[str, object]:
+    rng = np.random.default_rng(seed)
+    duration = minutes * 60.0
+
+    def truth(t: np.ndarray) -> np.ndarray:
+        return np.asarray(20 * (1 - np.cos(2 * np.pi * t / 300)) + 2 * np.sin(t / 7))
+
+    samples, kinds = [], ("gps", "baro", "rangefinder")
+    for rate, sigma in ((5.0, 0.7), (20.0, 0.1), (20.0, 0.03)):
+        t = np.arange(0, duration, 1 / rate)
+        samples.append((t, truth(t) + rng.normal(0, sigma, t.size)))
+    ti = np.arange(0, duration, 1 / 400)
+    accel = np.gradient(np.gradient(truth(ti), ti), ti) + 0.05 + rng.normal(0, 0.2, ti.size)
+    ticks = np.arange(0, duration, 0.1)
+    z = np.column_stack([np.interp(ticks, t, v) for t, v in samples])
+    return {
+        "z": z,
+        "samples": samples,
+        "kinds": kinds,
+        "names": kinds,
+        "t": ticks,
+        "accel": (ti, accel),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, nargs="+", default=[10.0, 30.0, 60.0])
+    args = parser.parse_args()
+    for minutes in args.minutes:
+        data = flight(minutes)
+        events = sum(s[0].size for s in data["samples"]) + data["t"].size  # type: ignore[union-attr,attr-defined]
+        started = time.perf_counter()
+        res = fuse_smoother(data.pop("z"), **data)  # type: ignore[arg-type]
+        wall = time.perf_counter() - started
+        print(
+            f"{minutes:5.0f} min: {events:,} events, 400 Hz IMU ({int(minutes * 60 * 400):,} "
+            f"samples): {wall:.1f} s, {wall / events * 1e6:.0f} us per event; "
+            f"finite {np.isfinite(res.fused).mean():.3f}"
+        )
+
+
+if __name__ == "__main__":
+    main()

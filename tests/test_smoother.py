@@ -1,0 +1,78 @@
+"""The offline smoother (issue 8, in progress): what it already guarantees."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from altfuse.cli import cli
+from altfuse.errors import ParameterError
+from altfuse.fuse.smoother import fuse_smoother, measurement_sigma
+from conftest import ROOT
+
+FAULTS = ROOT / "sample_logs" / "mission_faults.bin"
+
+
+def test_measurement_noise_from_second_differences() -> None:
+    rng = np.random.default_rng(0)
+    t = np.arange(0, 60, 0.05)
+    z = 10 * np.sin(t / 10) + rng.normal(0, 0.3, t.size)
+    assert measurement_sigma(z) == pytest.approx(0.3, rel=0.1)
+
+
+def test_a_constant_altitude_is_recovered_with_a_shrinking_std() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(0, 60, 0.1)
+    samples = [(t, 5 + rng.normal(0, s, t.size)) for s in (0.8, 0.2)]
+    z = np.column_stack([s[1] for s in samples])
+    res = fuse_smoother(z, samples=samples, kinds=("gps", "baro"), names=("gps", "baro"), t=t)
+    assert np.sqrt(np.mean((res.fused - 5) ** 2)) < 0.15
+    assert res.params["model"] == "altitude-only random walk (no IMU)"
+    np.testing.assert_array_less(0, res.tick_traces["fused_std"])
+    assert res.params["sigma_baro_m"] < res.params["sigma_gps_m"]
+
+
+def test_gating_rejects_the_gps_glitch_and_the_csv_has_fused_std(tmp_path: Path) -> None:
+    out = tmp_path / "o.csv"
+    result = CliRunner().invoke(cli, ["fuse", str(FAULTS), "-o", str(out), "-m", "smoother"])
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(out)
+    assert (table.fused_std_m > 0).all()
+    params = json.loads(out.with_suffix(".meta.json").read_text())["parameters"]
+    # the 15 m glitch lasts 5 s: 25 GPS samples at 5 Hz, gated out (a few more near its edges)
+    assert 20 <= params["rejected_gps"] <= 40
+    assert params["model"] == "accelerometer-driven"
+
+
+def test_sigma_override_and_nonsense_options(tmp_path: Path) -> None:
+    out = tmp_path / "o.csv"
+    result = CliRunner().invoke(
+        cli, ["fuse", str(FAULTS), "-o", str(out), "-m", "smoother", "--sigma", "gps=2.5"]
+    )
+    assert result.exit_code == 0, result.output
+    params = json.loads(out.with_suffix(".meta.json").read_text())["parameters"]
+    assert params["sigma_gps_m"] == 2.5
+    for args, fragment in (
+        (["--sigma", "lidar=1"], "--sigma names no sensor"),
+        (["--sigma", "gps"], "--sigma"),
+        (["--gate", "0"], "--gate"),
+    ):
+        bad = CliRunner().invoke(
+            cli, ["fuse", str(FAULTS), "-o", str(tmp_path / "x.csv"), "-m", "smoother", *args]
+        )
+        assert bad.exit_code == 2, bad.output
+        assert fragment in bad.stderr
+    with pytest.raises(ParameterError, match="--accel-noise"):
+        fuse_smoother(
+            np.ones((2, 1)),
+            samples=[(np.arange(2.0), np.ones(2))],
+            kinds=("gps",),
+            names=("gps",),
+            t=np.arange(2.0),
+            accel_noise=-1.0,
+        )
