@@ -76,3 +76,14 @@ def test_sigma_override_and_nonsense_options(tmp_path: Path) -> None:
             t=np.arange(2.0),
             accel_noise=-1.0,
         )
+
+
+def test_on_the_hover_log_it_beats_every_other_method() -> None:
+    """Measured on sample_logs/hover.bin: smoother 0.177 m RMSE; the best other, support, 0.377 m.
+    (Not yet so on every simulated flight: issue 8 is open.)"""
+    from altfuse.evaluate import evaluate
+
+    result = evaluate(ROOT / "sample_logs" / "hover.bin")
+    rmse = {r.name: r.overall.rmse for r in result.rows if r.kind == "method"}
+    best_other = min(v for k, v in rmse.items() if k != "smoother")
+    assert rmse["smoother"] < 0.6 * best_other

@@ -27,13 +27,13 @@ Measurements, each fused at its own sample time (no resampling before fusion)::
 Without IMU or ATT records the model falls back to altitude only: ``a = 0``, ``b`` frozen at 0,
 and a larger acceleration noise (a constant-velocity random walk); the metadata says so.
 
-Noise, from the log itself: each sensor's measurement noise from the spread of its second
+Noise, from the log itself: each sensor's measurement noise starts from the spread of its second
 differences (``sigma = 1.4826 MAD(d2 z) / sqrt(6)``, white noise surviving where a smooth flight
-cancels), then refined by innovation statistics: a first smoother pass measures each sensor's
-normalised innovation squared (NIS, 1 when the model fits), its variance is scaled by it (within
-1/4..4), and the pass is run again. The process noise densities are constants chosen by
-measurement on the simulated flights (calibration of ``fused_std``, tests/test_smoother.py).
-Every value can be overridden by option.
+cancels) and is refined by EM (``EM_PASSES`` smoother passes, each followed by the M-step
+``r_i = mean(residual^2 + H P H^T)`` over the sensor's accepted samples). The offsets' (and ground
+heights') random-walk densities come from the data by method of moments (:func:`offset_noise`):
+two sensors' difference drifts as the sum of their offsets' random walks. The acceleration noise
+is a constant. ``--sigma``, ``--accel-noise`` and ``--gate`` override.
 
 Innovation gating: a sample whose innovation exceeds ``gate`` standard deviations is rejected,
 counted per sensor and traced.
@@ -52,6 +52,7 @@ in the number of events: one forward and one backward step each.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -80,6 +81,40 @@ def measurement_sigma(z: FloatArray) -> float:
         return 1.0
     d2 = np.diff(z, 2)
     return max(1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0), _MIN_SIGMA_M)
+
+
+def offset_noise(z: FloatArray, dt: float, lags_s: tuple[float, float] = (5.0, 30.0)) -> FloatArray:
+    """Random-walk densities of the sensors' offsets [m^2/s], by method of moments.
+
+    Two sensors' difference is ``c_i - c_j`` plus white noise: the variance of its increments
+    over a lag ``L`` is ``(q_i + q_j) L + const``, so two lags give ``q_i + q_j`` free of the
+    noise; the pairs give each ``q_i`` (non-negative least squares; equal halves for two sensors).
+    """
+    m = z.shape[1]
+    default = np.full(m, np.nan)
+    if m < 2:
+        return default
+    l1, l2 = (max(1, round(lag / dt)) for lag in lags_s)
+    rows, rhs = [], []
+    for i in range(m):
+        for j in range(i + 1, m):
+            d = z[:, i] - z[:, j]
+            with np.errstate(invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # no overlap: NaN, handled
+                v1 = np.nanmean((d[l1:] - d[:-l1]) ** 2) if d.size > l1 else np.nan
+                v2 = np.nanmean((d[l2:] - d[:-l2]) ** 2) if d.size > l2 else np.nan
+            if np.isfinite(v1) and np.isfinite(v2):
+                row = np.zeros(m)
+                row[[i, j]] = 1.0
+                rows.append(row)
+                rhs.append(max((v2 - v1) / ((l2 - l1) * dt), 0.0))
+    if not rows:
+        return default
+    a, b = np.array(rows), np.array(rhs)
+    if m == 2:
+        return np.full(2, b[0] / 2)
+    q = np.linalg.lstsq(a, b, rcond=None)[0]
+    return np.asarray(np.maximum(q, 0.0))
 
 
 def _events(
@@ -266,8 +301,14 @@ def fuse_smoother(
     x0 = np.zeros(3 + m)
     x0[0] = float(np.median(first)) if first else 0.0
     r = sigma**2
-    q_state = np.array([Q_OFFSET.get(k, 0.02) for k in kinds])
-    span = max(float(times[-1] - times[0]), 1e-9)
+    moments = offset_noise(z, float(np.median(np.diff(t))) if t.size > 1 else 0.1)
+    q_state = np.array(
+        [
+            Q_OFFSET.get(k, 0.02) if not np.isfinite(q) else q
+            for k, q in zip(kinds, moments, strict=True)
+        ]
+    )
+    q_state = np.clip(q_state, Q_STATE_MIN, Q_STATE_MAX)
     sign = np.array([-1.0 if k == "rangefinder" else 1.0 for k in kinds])
     for npass in range(EM_PASSES + 1):
         out = _run(times, who, values, a, kinds, r, q_accel, q_state, use_imu, gate, x0)
@@ -284,7 +325,7 @@ def fuse_smoother(
             var_h = ps[mine, 0, 0] + ps[mine, 3 + i, 3 + i] + 2 * sign[i] * ps[mine, 0, 3 + i]
             if not fixed[i]:
                 r[i] = max(float(np.mean(resid**2 + var_h)), _MIN_SIGMA_M**2)
-        q_state = np.clip(out["increments"] / span, Q_STATE_MIN, Q_STATE_MAX)
+
     tick = who == -1
     xs, ps = out["x"][tick], out["p"][tick]
     # contributions: each sensor's share of the gain on h carried since the previous tick
