@@ -128,6 +128,14 @@ def cli(verbose: int, quiet: bool, debug: bool) -> None:  # noqa: ARG001 (read i
 
 _LOG_ARG = click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
 _PATH = click.Path(dir_okay=False, path_type=Path)
+_METHOD = click.option(
+    "-m",
+    "--method",
+    type=click.Choice(list(FUSERS)),
+    default="support",
+    show_default=True,
+    help="Fusion method.",
+)
 
 
 def _method_option(
@@ -233,14 +241,7 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
 @cli.command()
 @_LOG_ARG
 @_output_option("The fused CSV to write; the provenance goes beside it as NAME.meta.json.")
-@click.option(
-    "-m",
-    "--method",
-    type=click.Choice(list(FUSERS)),
-    default="support",
-    show_default=True,
-    help="Fusion method.",
-)
+@_METHOD
 @_pipeline_options
 @_method_option(
     "--alpha", _AlphaType(), "support: kernel scale [1/m^2], or 'auto' (from the data; default)."
@@ -496,14 +497,7 @@ class _Progress:
     is_flag=True,
     help="Skip logs whose outputs are complete for this input and these options.",
 )
-@click.option(
-    "-m",
-    "--method",
-    type=click.Choice(list(FUSERS)),
-    default="support",
-    show_default=True,
-    help="Fusion method.",
-)
+@_METHOD
 @_pipeline_options
 @click.option("--weights", is_flag=True, help="Also write each log's weight traces.")
 @click.option(
