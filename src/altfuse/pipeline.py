@@ -166,7 +166,15 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
 def accel_on_clock(
     flight: FlightLog, referred: Referred, options: FuseOptions
 ) -> tuple[FloatArray, dict[str, Any]]:
-    """Earth-frame vertical acceleration on the clock, less its at-rest reading.
+    """Earth-frame vertical acceleration on the clock, less its at-rest reading."""
+    _, _, a_clock, record = _vertical(flight, referred, options)
+    return a_clock - record["at_rest_bias_m_s2"], record
+
+
+def _vertical(
+    flight: FlightLog, referred: Referred, options: FuseOptions
+) -> tuple[FloatArray, FloatArray, FloatArray, dict[str, Any]]:
+    """The vertical acceleration samples, their averages on the clock, and the at-rest reading.
 
     Paper B subtracts the at-rest reading; here it is the median of ``a_up`` over the datum's
     ground window (the vehicle still, on the ground or in a steady hover). The median, because
@@ -190,7 +198,7 @@ def accel_on_clock(
         "bias_window_s": [lo, hi],
         "ticks_without_imu": int((~np.isfinite(a_clock)).sum()),
     }
-    return a_clock - bias, record
+    return t, a, a_clock, record
 
 
 def accel_samples(
@@ -200,8 +208,7 @@ def accel_samples(
     None (and the record says so) when the log has no IMU or ATT."""
     if flight.imu is None or flight.attitude is None:
         return None, {"source": None, "note": "no IMU or ATT records: altitude-only model"}
-    _, record = accel_on_clock(flight, referred, options)
-    t, a = vertical_acceleration(flight.imu, flight.attitude)
+    t, a, _, record = _vertical(flight, referred, options)
     return (t, a - record["at_rest_bias_m_s2"]), record
 
 
