@@ -178,7 +178,9 @@ def process(job: Job, options: BatchOptions) -> LogResult:
         truth = None
         label = ""
         if options.evaluate:
-            evaluation = evaluate_prepared(prepared, options=options.fuse)
+            # the batch's run has the evaluation's options (no method parameters): reuse it
+            done = {options.fuse.method: run}
+            evaluation = evaluate_prepared(prepared, options=options.fuse, done=done)
             truth = evaluation.truth
             label = truth.source + (" (reference)" if truth.is_reference else "")
             extra[wanted["evaluation"]] = (write_json(evaluation.as_dict()), False)

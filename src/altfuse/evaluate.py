@@ -10,6 +10,7 @@ is removed), so that a constant datum difference is not counted as error.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -67,7 +68,7 @@ class Evaluation:
     def best(self) -> str:
         """The method run with the lowest overall RMSE."""
         scores = {r.name: r.overall.rmse for r in self.rows if r.kind == "method"}
-        return min(self.runs, key=lambda m: scores[m] if scores[m] == scores[m] else np.inf)
+        return min(self.runs, key=lambda m: scores[m] if math.isfinite(scores[m]) else math.inf)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -190,8 +191,12 @@ def evaluate_prepared(
     options: FuseOptions | None = None,
     truth: str = "auto",
     segments: str | None = None,
+    done: dict[str, FuseRun] | None = None,
 ) -> Evaluation:
-    """:func:`evaluate` on sources already prepared (read, aligned, referred)."""
+    """:func:`evaluate` on sources already prepared (read, aligned, referred).
+
+    ``done``: runs already made with these options and no method parameters, reused as they are.
+    """
     options = options or FuseOptions()
     methods = list(methods or FUSERS)
     unknown = [m for m in methods if m not in FUSERS]
@@ -203,7 +208,9 @@ def evaluate_prepared(
     rows, runs, failed = [], {}, {}
     for method in methods:
         try:
-            run = run_method(prepared, replace(options, method=method, params={}))
+            run = (done or {}).get(method) or run_method(
+                prepared, replace(options, method=method, params={})
+            )
         except AltfuseError as exc:
             failed[method] = str(exc)
             continue

@@ -150,12 +150,21 @@ def _mean_accel(accel: tuple[FloatArray, FloatArray] | None, t: FloatArray) -> F
     return np.asarray(mean)
 
 
+def _transition(dt: float, n: int, use_bias: bool) -> FloatArray:
+    """F over ``dt``: h += v dt - b dt^2/2, v += -b dt; the rest random walks (identity)."""
+    f = np.eye(n)
+    f[0, 1] = dt
+    if use_bias:
+        f[0, 2], f[1, 2] = -0.5 * dt * dt, -dt
+    return f
+
+
 def _run(
     t: FloatArray,
     who: np.ndarray,
     z: FloatArray,
     a: FloatArray,
-    kinds: Sequence[str],
+    sign: FloatArray,
     r: FloatArray,
     q_accel: float,
     q_state: FloatArray,
@@ -163,8 +172,11 @@ def _run(
     gate: float,
     x0: FloatArray,
 ) -> dict[str, np.ndarray]:
-    """Forward filter and RTS pass over the events; the smoothed states and their diagnostics."""
-    m = len(kinds)
+    """Forward filter and RTS pass over the events; the smoothed states and their diagnostics.
+
+    ``sign`` is +1 for a sensor measuring ``h + c_i``, -1 for one measuring ``h - c_i``.
+    """
+    m = sign.size
     n = 3 + m
     count = t.size
     xp = np.zeros((count, n))
@@ -173,8 +185,6 @@ def _run(
     pf = np.zeros((count, n, n))
     gain_h = np.zeros(count)
     accepted = np.zeros(count, dtype=bool)
-    nis = np.full(count, np.nan)
-    sign = np.array([-1.0 if k == "rangefinder" else 1.0 for k in kinds])
     x = x0.copy()
     # without the accelerometer the bias is inert: a tiny fixed variance keeps P invertible
     p = np.diag([10.0**2, 3.0**2, 0.1**2 if use_bias else 1e-9] + [1.0**2] * m)
@@ -183,10 +193,7 @@ def _run(
         dt = t[k] - previous
         previous = t[k]
         if dt > 0:
-            f = np.eye(n)
-            f[0, 1] = dt
-            if use_bias:
-                f[0, 2], f[1, 2] = -0.5 * dt * dt, -dt
+            f = _transition(dt, n, use_bias)
             x = f @ x
             x[0] += 0.5 * a[k] * dt * dt
             x[1] += a[k] * dt
@@ -205,8 +212,7 @@ def _run(
             y = z[k] - hrow @ x
             ph = p @ hrow
             s = hrow @ ph + r[i]
-            nis[k] = y * y / s
-            if nis[k] <= gate * gate:
+            if y * y <= gate * gate * s:  # innovation gate
                 kg = ph / s
                 x = x + kg * y
                 p = p - np.outer(kg, ph)
@@ -215,30 +221,12 @@ def _run(
         xf[k], pf[k] = x, p
     # Rauch-Tung-Striebel: x_s(k) = x_f(k) + C (x_s(k+1) - x_p(k+1)), C = P_f F^T P_p(k+1)^-1
     xs, ps = xf.copy(), pf.copy()
-    # for EM: sum over steps of E[(c(k+1) - c(k))^2] for the offset states, with the lag-one
-    # covariance P(k+1, k | N) = P_s(k+1) C^T
-    increments = np.zeros(m)
     for k in range(count - 2, -1, -1):
-        dt = t[k + 1] - t[k]
-        f = np.eye(n)
-        f[0, 1] = dt
-        if use_bias:
-            f[0, 2], f[1, 2] = -0.5 * dt * dt, -dt
+        f = _transition(t[k + 1] - t[k], n, use_bias)
         c = np.linalg.solve(pp[k + 1].T, (pf[k] @ f.T).T).T
         xs[k] = xf[k] + c @ (xs[k + 1] - xp[k + 1])
         ps[k] = pf[k] + c @ (ps[k + 1] - pp[k + 1]) @ c.T
-        if dt > 0:
-            lag = np.diag(ps[k + 1] @ c.T)[3:]
-            step = xs[k + 1, 3:] - xs[k, 3:]
-            increments += step**2 + np.diag(ps[k + 1])[3:] + np.diag(ps[k])[3:] - 2 * lag
-    return {
-        "x": xs,
-        "p": ps,
-        "gain_h": gain_h,
-        "accepted": accepted,
-        "nis": nis,
-        "increments": increments,
-    }
+    return {"x": xs, "p": ps, "gain_h": gain_h, "accepted": accepted}
 
 
 def fuse_smoother(
@@ -273,8 +261,8 @@ def fuse_smoother(
     accel_noise
         White acceleration PSD [m^2/s^3]; default ``Q_ACCEL``, or ``Q_ACCEL_NO_IMU`` without IMU.
     sigmas
-        Measurement noise [m] by sensor name; the others are estimated from the log and refined
-        by their innovation statistics.
+        Measurement noise [m] by sensor name; the others are estimated from the log (second
+        differences, then EM).
     gate
         Innovation gate [standard deviations].
     """
@@ -311,11 +299,10 @@ def fuse_smoother(
     q_state = np.clip(q_state, Q_STATE_MIN, Q_STATE_MAX)
     sign = np.array([-1.0 if k == "rangefinder" else 1.0 for k in kinds])
     for npass in range(EM_PASSES + 1):
-        out = _run(times, who, values, a, kinds, r, q_accel, q_state, use_imu, gate, x0)
+        out = _run(times, who, values, a, sign, r, q_accel, q_state, use_imu, gate, x0)
         if npass == EM_PASSES:
             break
-        # EM, M-step: measurement variances from the smoothed residuals, offset (and ground)
-        # random-walk densities from the smoothed increments
+        # EM, M-step: the measurement variances from the smoothed residuals
         xs, ps = out["x"], out["p"]
         for i in range(m):
             mine = (who == i) & out["accepted"]

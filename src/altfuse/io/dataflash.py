@@ -95,6 +95,7 @@ class _Records:
         self.formats = {f.name: f for f in index.formats.values()}
         self.counts = index.counts()
         self._tables: dict[str, npt.NDArray[Any]] = {}
+        self._raw: dict[tuple[str, str], FloatArray] = {}
         self.fmtu: dict[int, tuple[str, str]] = {}
         self.unit_lookup: dict[str, str] = {}
         self.mult_lookup: dict[str, float] = {}
@@ -132,9 +133,13 @@ class _Records:
         )
 
     def raw(self, type_name: str, col: str) -> FloatArray:
-        """A numeric field as pymavlink decodes it (legacy format scales applied)."""
-        fmt = self.formats[type_name]
-        return _scaled(self.table(type_name)[col], fmt.format[fmt.columns.index(col)])
+        """A numeric field as pymavlink decodes it (legacy format scales applied); computed once
+        per column (each instance of a type asks for its times again). Do not modify it."""
+        key = (type_name, col)
+        if key not in self._raw:
+            fmt = self.formats[type_name]
+            self._raw[key] = _scaled(self.table(type_name)[col], fmt.format[fmt.columns.index(col)])
+        return self._raw[key]
 
     def text(self, type_name: str, col: str) -> list[str]:
         return [_text(v) for v in self.table(type_name)[col].tolist()]
