@@ -92,3 +92,5 @@ class FlightLog:
     notes: tuple[str, ...] = ()
     dropped_sources: dict[str, str] = field(default_factory=dict)
     params: dict[str, float] = field(default_factory=dict)
+    ground_speed: Series | None = None  # horizontal speed [m/s], kind "speed"
+    temperatures: dict[str, Series] = field(default_factory=dict)  # [degC] by sensor name

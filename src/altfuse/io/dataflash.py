@@ -21,7 +21,9 @@ Altitude sources (inputs):
 - Fallbacks: with no BARO records, ``CTUN.BAlt``/``BarAlt``; with no RFND/SONR records,
   ``CTUN.SAlt``/``SonAlt`` (0 there means "no reading"). The choice is noted.
 
-Kept for later stages: IMU (first instance) accelerations, ATT attitude. References, never
+Kept for later stages: IMU (first instance) accelerations, ATT attitude, the horizontal speed
+over ground (``GPS.Spd`` of the first instance with a 3D fix), each barometer's temperature
+(``BARO.Temp``). References, never
 inputs: EKF height (``XKF1``/``NKF1`` ``-PD``, with the EKF origin from ``ORGN``), ``AHR2.Alt``,
 ``POS.Alt``, ``CTUN.Alt`` and the simulator's true altitude ``SIM.Alt``.
 """
@@ -200,6 +202,7 @@ class _Builder:
         self.sensors: dict[str, Series] = {}
         self.dropped_sources: dict[str, str] = {}
         self.notes: list[str] = []
+        self.temperatures: dict[str, Series] = {}
 
     def add(
         self,
@@ -309,6 +312,15 @@ def _read_baro(b: _Builder) -> bool:
             default=default,
             invalid=invalid,
         )
+        if b.rec.has(type_name, "Temp"):
+            for inst, sel in _instances(b.rec, type_name, "I", default):
+                t, temp = b.rec.times(type_name)[sel], b.rec.column(type_name, "Temp")[sel]
+                keep = np.isfinite(t) & np.isfinite(temp)
+                name = _instance_name("baro", inst)
+                if keep.any() and name not in b.temperatures:
+                    b.temperatures[name] = Series(
+                        name, "temperature", f"{type_name}.Temp", "degC", t[keep], temp[keep]
+                    )
     return found
 
 
@@ -440,6 +452,23 @@ def _read_references(rec: _Records) -> list[Series]:
     return [c for c in candidates if c is not None]
 
 
+def _read_ground_speed(rec: _Records) -> Series | None:
+    """Horizontal speed over ground [m/s] from the first GPS instance with a 3D fix."""
+    for type_name in ("GPS", "GPS2", "GPS3"):
+        if not rec.timed(type_name, "Spd", "Status"):
+            continue
+        select = rec.raw(type_name, "Status") >= 3
+        if rec.has(type_name, "I"):
+            select &= rec.raw(type_name, "I") == 0
+        t, v = rec.times(type_name)[select], rec.column(type_name, "Spd")[select]
+        keep = np.isfinite(t) & np.isfinite(v) & (v >= 0)
+        if keep.any():
+            return Series(
+                "ground_speed", "speed", f"{type_name}.Spd", "horizontal", t[keep], v[keep]
+            )
+    return None
+
+
 def _read_imu(rec: _Records) -> Imu | None:
     if not rec.timed("IMU", "AccX", "AccY", "AccZ"):
         return None
@@ -504,6 +533,8 @@ def read_dataflash(path: str | Path) -> FlightLog:
         notes=tuple(b.notes),
         dropped_sources=b.dropped_sources,
         params=_params(rec),
+        ground_speed=_read_ground_speed(rec),
+        temperatures=b.temperatures,
     )
 
 
