@@ -14,8 +14,8 @@ METHODS = sorted(FUSERS)
 
 
 def call(method: str, z: np.ndarray) -> FusionResult:
-    """Run ``method``, giving it the log inputs it asks for: no acceleration, a 10 Hz clock, the
-    clock's values as each sensor's samples."""
+    """Run ``method``, giving it the log inputs it asks for: no acceleration, speed or
+    temperature, a 10 Hz clock, the clock's values as each sensor's samples."""
     t = np.arange(z.shape[0]) * 0.1
     n = z.shape[1]
     inputs = {
@@ -26,6 +26,9 @@ def call(method: str, z: np.ndarray) -> FusionResult:
         "samples": [(t[np.isfinite(z[:, i])], z[np.isfinite(z[:, i]), i]) for i in range(n)],
         "kinds": ("gps", "baro", "rangefinder")[:n],
         "names": ("gps", "baro", "rangefinder")[:n],
+        "on_ground": None,
+        "speed": None,
+        "temperatures": None,
     }
     wanted = set(inspect.signature(FUSERS[method]).parameters) & LOG_INPUTS
     return FUSERS[method](z, **{k: inputs[k] for k in wanted})

@@ -32,7 +32,7 @@ from altfuse.fuse.complementary import (
     DEFAULT_T_S,
 )
 from altfuse.fuse.delay import DEFAULT_Q, FORMS
-from altfuse.fuse.smoother import DEFAULT_GATE, Q_ACCEL, Q_ACCEL_NO_IMU
+from altfuse.fuse.smoother import DEFAULT_GATE, Q_ACCEL_NO_IMU
 from altfuse.fuse.support import DEFAULT_BETA, DEFAULT_WINDOW
 from altfuse.info import damage, describe
 from altfuse.io import read_log
@@ -46,7 +46,7 @@ EXIT_BUG = 3
 #: Options that are parameters of a fusion method (passed on only when given).
 METHOD_OPTIONS = (
     "alpha", "beta", "window", "form", "q", "time_constant", "e_max", "reopen", "gate",
-    "accel_noise", "sigmas",
+    "accel_noise", "sigmas", "offset_noises",
 )  # fmt: skip
 
 
@@ -216,7 +216,7 @@ def _refuse_existing(force: bool, *paths: Path | None) -> None:
             raise ParameterError(f"{path} exists; --force overwrites it")
 
 
-def _parse_sigmas(values: tuple[str, ...]) -> dict[str, float] | None:
+def _parse_per_sensor(values: tuple[str, ...], hint: str, unit: str) -> dict[str, float] | None:
     if not values:
         return None
     out = {}
@@ -225,8 +225,21 @@ def _parse_sigmas(values: tuple[str, ...]) -> dict[str, float] | None:
         try:
             out[name.strip()] = float(number)
         except ValueError:
-            raise click.BadParameter(f"{item!r} is not NAME=METRES", param_hint="--sigma") from None
+            raise click.BadParameter(f"{item!r} is not NAME={unit}", param_hint=hint) from None
     return out
+
+
+def _per_sensor_option(
+    flag: str, dest: str, unit: str, text: str
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """A repeatable smoother option NAME=VALUE, one value per sensor."""
+    return click.option(
+        flag,
+        dest,
+        multiple=True,
+        callback=lambda _ctx, _param, value: _parse_per_sensor(value, flag, unit),
+        help=f"smoother: {text} NAME={unit}, repeatable.",
+    )
 
 
 def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
@@ -284,15 +297,17 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
     "--accel-noise",
     float,
     "smoother: white acceleration noise density [m^2/s^3] "
-    f"[default {Q_ACCEL:g}, {Q_ACCEL_NO_IMU:g} without IMU].",
+    f"[default: from the accelerometer's noise, {Q_ACCEL_NO_IMU:g} without IMU].",
 )
-@click.option(
-    "--sigma",
-    "sigmas",
-    multiple=True,
-    callback=lambda _ctx, _param, value: _parse_sigmas(value),
-    help="smoother: a sensor's measurement noise, NAME=METRES (repeatable) [default: from the "
-    "log].",
+@_per_sensor_option(
+    "--sigma", "sigmas", "METRES", "a sensor's measurement noise [default: from the log]."
+)
+@_per_sensor_option(
+    "--offset-noise",
+    "offset_noises",
+    "M2_PER_S",
+    "random-walk density of a sensor's offset (a rangefinder's ground height) [default: gps "
+    "0.01, baro 1e-4; rangefinder from the terrain and the speed].",
 )
 @click.option(
     "--weights",

@@ -41,6 +41,9 @@ from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Series
 MIN_WINDOW_TICKS = 3
 #: The ground window ends this long before the detected take-off [s].
 TAKEOFF_MARGIN_S = 1.0
+#: The vehicle is taken to stand still until this long before the detected take-off [s]: a gentle
+#: climb can take 2-3 s to rise the 1 m that detects it (0.3 m at the ground window's end).
+STILL_MARGIN_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -67,6 +70,19 @@ class Referred:
     ground_window_s: tuple[float, float]
     offsets: tuple[Offset, ...]
     dropped: dict[str, str]
+
+    @property
+    def on_ground_s(self) -> tuple[float, float] | None:
+        """The span in which the vehicle stood still at the take-off point: the ground window
+        up to ``STILL_MARGIN_S`` before a detected take-off; None if it is empty or there was no
+        take-off."""
+        if self.takeoff_s is None:
+            return None
+        lo, hi = (
+            self.ground_window_s[0],
+            min(self.ground_window_s[1], self.takeoff_s - STILL_MARGIN_S),
+        )
+        return (lo, hi) if hi > lo else None
 
 
 def tilt_correct(series: Series, attitude: Attitude | None) -> Series:

@@ -138,6 +138,16 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
         inputs["dt_s"] = 1.0 / options.rate_hz
     if "samples" in wanted:
         inputs["samples"] = referred_samples(prepared)
+    if "on_ground" in wanted:
+        inputs["on_ground"] = referred.on_ground_s
+    if "speed" in wanted:
+        speed = flight.ground_speed
+        inputs["speed"] = None if speed is None else (speed.t, speed.value)
+    if "temperatures" in wanted:
+        temps = flight.temperatures
+        inputs["temperatures"] = [
+            (temps[n].t, temps[n].value) if n in temps else None for n in referred.names
+        ]
     for name, value in (("t", referred.t), ("kinds", referred.kinds), ("names", referred.names)):
         if name in wanted:
             inputs[name] = value

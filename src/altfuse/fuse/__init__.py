@@ -29,7 +29,14 @@ FUSERS: dict[str, Callable[..., FusionResult]] = {
 #: Keyword arguments a fuser may take that come from the log, not from the user: the earth-frame
 #: vertical acceleration on the clock [m/s²] (accel_up) or as samples (accel: times, values; None
 #: without IMU/ATT), the clock's tick [s] (dt_s) and times (t), and each sensor's own referred
-#: samples (samples), kinds and names.
-LOG_INPUTS = frozenset({"accel_up", "dt_s", "accel", "t", "samples", "kinds", "names"})
+#: samples (samples), kinds and names, the span in which the vehicle stood at the take-off point
+#: (on_ground), the horizontal speed samples (speed) and each sensor's temperature samples
+#: (temperatures, a list in the sensors' order); None when the log cannot tell.
+LOG_INPUTS = frozenset(
+    {
+        "accel_up", "dt_s", "accel", "t", "samples", "kinds", "names",
+        "on_ground", "speed", "temperatures",
+    }
+)  # fmt: skip
 
 __all__ = ["FUSERS", "LOG_INPUTS", "FusionResult"]

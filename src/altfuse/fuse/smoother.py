@@ -5,13 +5,14 @@ this method uses it. Beyond the papers (issue 8); textbook references: Rauch, Tu
 AIAA J. 3(8), 1965, doi:10.2514/3.3166; Bar-Shalom, Li & Kirubarajan, *Estimation with
 Applications to Tracking and Navigation*, 2001, ch. 5 and 8.
 
-State (``n = 3 +`` one per sensor)::
+State (``n = 3 +`` one per sensor ``+`` one per barometer with a logged temperature)::
 
-    x = [h, v, b, c_1 .. c_m]
+    x = [h, v, b, c_1 .. c_m, k_1 ..]
     h  height above take-off [m]            v  vertical velocity [m/s]
     b  accelerometer bias [m/s^2]          c_i  for a GPS or barometer: its offset [m];
                                                  for a rangefinder: the ground height under the
                                                  vehicle above take-off [m]
+    k_j  a barometer's temperature coefficient [m/degC] (a constant, learnt from the flight)
 
 Process, between consecutive events ``dt`` apart, driven by the mean earth-frame vertical
 acceleration ``a`` over the interval (the IMU integrated exactly between events, so the filter
@@ -22,18 +23,40 @@ steps at the measurements' rate, not the IMU's)::
 
 Measurements, each fused at its own sample time (no resampling before fusion)::
 
-    GPS, barometer:  z_i = h + c_i + n_i          rangefinder:  z_i = h - c_i + n_i
+    GPS:  z_i = h + c_i + n_i       barometer:  z_i = h + c_i + k_j (T - T_0) + n_i
+    rangefinder:  z_i = h - c_i + n_i
+
+A GPS's lag (0.2 s in the simulator) is not modelled: estimated from the log and undone, it
+changed no simulated flight's RMSE by more than 0.01 m, and the estimate was unstable.
+
+On the ground before take-off (the datum's ground window, ending ``STILL_MARGIN_S`` before the
+detected take-off) the vehicle stands at the take-off point: ``h = 0`` and ``v = 0`` there. This
+pins what the sensors alone leave free (all offsets and ``h`` can shift together) and makes
+``fused_std`` an uncertainty about the height above take-off.
 
 Without IMU or ATT records the model falls back to altitude only: ``a = 0``, ``b`` frozen at 0,
 and a larger acceleration noise (a constant-velocity random walk); the metadata says so.
 
-Noise, from the log itself: each sensor's measurement noise starts from the spread of its second
-differences (``sigma = 1.4826 MAD(d2 z) / sqrt(6)``, white noise surviving where a smooth flight
-cancels) and is refined by EM (``EM_PASSES`` smoother passes, each followed by the M-step
-``r_i = mean(residual^2 + H P H^T)`` over the sensor's accepted samples). The offsets' (and ground
-heights') random-walk densities come from the data by method of moments (:func:`offset_noise`):
-two sensors' difference drifts as the sum of their offsets' random walks. The acceleration noise
-is a constant. ``--sigma``, ``--accel-noise`` and ``--gate`` override.
+From the log itself:
+
+- measurement noise: each sensor's local spread of second differences over ``NOISE_WINDOW_S``
+  (``sigma = 1.4826 MAD(d2 z) / sqrt(6)``: white noise survives where a smooth flight cancels;
+  sensors get noisier and quieter within a flight), scaled by EM (``EM_PASSES`` smoother passes,
+  each followed by the M-step ``s_i = mean((residual^2 + H P H^T) / sigma^2)`` over the sensor's
+  accepted samples);
+- the acceleration noise, from the accelerometer's own sample-to-sample spread
+  (:func:`accel_psd`);
+- each barometer's temperature coefficient (a state, above);
+- the terrain's roughness under a rangefinder, per metre flown (:func:`terrain_noise`, with the
+  horizontal speed from ``GPS.Spd``): over flat ground, or hovering, the rangefinder is an
+  absolute reference; over hills it tells only short-term changes.
+
+The offsets' random-walk densities are physical defaults (``Q_OFFSET``: a GPS's vertical error
+wanders by about 1 m over 100 s; a barometer, once its temperature is modelled, by centimetres),
+not estimates: with two drifting sensors the log fixes only the sum of their densities, and
+splitting it evenly (the method of moments, and EM, which did not move from there) gave the
+barometer the GPS's wander (hover RMSE 0.35 m against 0.07 m with the defaults). ``--sigma``,
+``--offset-noise``, ``--accel-noise`` and ``--gate`` override.
 
 Innovation gating: a sample whose innovation exceeds ``gate`` standard deviations is rejected,
 counted per sensor and traced.
@@ -41,6 +64,12 @@ counted per sensor and traced.
 Outputs: the smoothed height at the clock's ticks, its standard deviation (``fused_std``), the
 velocity, bias and each sensor's offset (or ground height), and each sensor's contribution: the
 share, per tick, of the total Kalman gain on ``h`` that its accepted samples carried.
+
+Limits (measured, ``benchmarks/smoother_accuracy.py``): a slow departure of a sensor the model
+holds to be stable (a barometer ramping at 0.05 m/s, Paper A's 2.5 m barometer excursion with no
+third sensor to outvote it) is followed rather than rejected: the innovation gate sees only
+jumps. ``fused_std`` is then too small; where the defaults overstate a drift (the simulator's
+barometer has none beyond its temperature), too large.
 
 Implementation: numpy. filterpy's ``KalmanFilter`` and ``rts_smoother`` expect one measurement
 vector of fixed size per step; here each step carries one scalar measurement of any sensor, or
@@ -52,10 +81,10 @@ in the number of events: one forward and one backward step each.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Sequence
 
 import numpy as np
+import pandas as pd
 
 from altfuse.errors import ParameterError
 from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionResult
@@ -63,15 +92,27 @@ from altfuse.model import FloatArray
 
 #: Process noise defaults (power spectral densities): white acceleration [m^2/s^3] with and
 #: without the accelerometer, bias random walk [m^2/s^5], offset random walks [m^2/s] for GPS and
-#: barometer, ground-height random walk under a moving vehicle [m^2/s].
+#: barometer, and for a rangefinder's ground height when the horizontal speed is unknown.
 Q_ACCEL = 0.05
+Q_ACCEL_MIN = 1e-3
 Q_ACCEL_NO_IMU = 2.0
 Q_BIAS = 1e-5
-Q_OFFSET = {"gps": 0.02, "baro": 0.002, "rangefinder": 0.3}
+Q_OFFSET = {"gps": 0.01, "baro": 1e-4, "rangefinder": 0.3}
+#: Ground height under a moving vehicle: random walk per metre flown [m^2/m] when the log cannot
+#: tell, and its floor in time [m^2/s] (a hovering vehicle drifts a little).
+Q_TERRAIN_PER_M = 0.05
+Q_GROUND_STILL = 1e-4
 DEFAULT_GATE = 5.0
+#: Prior on a barometer's temperature coefficient [m/degC] (a constant, learnt from the flight).
+THERMAL_PRIOR = 0.5
+#: How well "standing still at the take-off point" holds on the ground [m, m/s].
+STILL_SIGMA = 0.02
 #: EM iterations (each a forward and a backward pass) after the first pass.
 EM_PASSES = 4
-Q_STATE_MIN, Q_STATE_MAX = 1e-5, 1.0
+#: Window [s] of the local measurement-noise estimate.
+NOISE_WINDOW_S = 5.0
+Q_TERRAIN_MAX = 1.0
+MAX_SPEED_M_S = 100.0
 _MIN_SIGMA_M = 0.01
 
 
@@ -83,71 +124,99 @@ def measurement_sigma(z: FloatArray) -> float:
     return max(1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0), _MIN_SIGMA_M)
 
 
-def offset_noise(z: FloatArray, dt: float, lags_s: tuple[float, float] = (5.0, 30.0)) -> FloatArray:
-    """Random-walk densities of the sensors' offsets [m^2/s], by method of moments.
+def accel_psd(t: FloatArray, a: FloatArray) -> float:
+    """White-noise density of the vertical acceleration [m^2/s^3]: the spread of its first
+    differences (``sigma = 1.4826 MAD(d a) / sqrt(2)``) times the sampling interval, floored at
+    ``Q_ACCEL_MIN`` (vibration and attitude errors the spread does not show)."""
+    if a.size < 10:
+        return Q_ACCEL
+    d = np.diff(a)
+    sigma = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0)
+    return max(sigma**2 * float(np.median(np.diff(t))), Q_ACCEL_MIN)
 
-    Two sensors' difference is ``c_i - c_j`` plus white noise: the variance of its increments
-    over a lag ``L`` is ``(q_i + q_j) L + const``, so two lags give ``q_i + q_j`` free of the
-    noise; the pairs give each ``q_i`` (non-negative least squares; equal halves for two sensors).
+
+def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) -> FloatArray:
+    """Noise of one sensor at each of its samples [m]: :func:`measurement_sigma` over a running
+    window of ``window_s`` (sensors get noisier and quieter within a flight)."""
+    if z.size < 5:
+        return np.full(z.size, measurement_sigma(z))
+    d2 = np.abs(np.diff(z, 2))
+    d2 = np.concatenate(([d2[0]], d2, [d2[-1]]))
+    width = max(5, round(window_s / float(np.median(np.diff(t)) or 1.0)))
+    med = pd.Series(d2).rolling(width, center=True, min_periods=3).median().to_numpy()
+    return np.asarray(np.maximum(1.4826 * med / math.sqrt(6.0), _MIN_SIGMA_M))
+
+
+def terrain_noise(d: FloatArray, flown: FloatArray, lag: int) -> float:
+    """Ground-height random walk per metre flown [m^2/m], by method of moments; NaN if unknown.
+
+    ``d`` is another sensor minus a rangefinder on the clock (the ground height plus both
+    sensors' errors), ``flown`` the distance flown [m] on the clock. Over ``lag`` ticks the
+    squared change of ``d`` is ``q dx + const`` (``const``: the noise, and drift too slow to
+    matter over the lag): regressed on the distance ``dx`` flown meanwhile.
     """
-    m = z.shape[1]
-    default = np.full(m, np.nan)
-    if m < 2:
-        return default
-    l1, l2 = (max(1, round(lag / dt)) for lag in lags_s)
-    rows, rhs = [], []
-    for i in range(m):
-        for j in range(i + 1, m):
-            d = z[:, i] - z[:, j]
-            with np.errstate(invalid="ignore"), warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)  # no overlap: NaN, handled
-                v1 = np.nanmean((d[l1:] - d[:-l1]) ** 2) if d.size > l1 else np.nan
-                v2 = np.nanmean((d[l2:] - d[:-l2]) ** 2) if d.size > l2 else np.nan
-            if np.isfinite(v1) and np.isfinite(v2):
-                row = np.zeros(m)
-                row[[i, j]] = 1.0
-                rows.append(row)
-                rhs.append(max((v2 - v1) / ((l2 - l1) * dt), 0.0))
-    if not rows:
-        return default
-    a, b = np.array(rows), np.array(rhs)
-    if m == 2:
-        return np.full(2, b[0] / 2)
-    q = np.linalg.lstsq(a, b, rcond=None)[0]
-    return np.asarray(np.maximum(q, 0.0))
+    if d.size <= lag:
+        return math.nan
+    dd, dx = d[lag:] - d[:-lag], flown[lag:] - flown[:-lag]
+    ok = np.isfinite(dd) & np.isfinite(dx)
+    if (ok & (dx > 1.0)).sum() < 10 or (ok & (dx <= 1.0)).sum() < 10:
+        return math.nan
+    design = np.column_stack([dx[ok], np.ones(ok.sum())])
+    slope = float(np.linalg.lstsq(design, dd[ok] ** 2, rcond=None)[0][0])
+    return max(slope, 0.0)
 
 
 def _events(
     samples: Sequence[tuple[FloatArray, FloatArray]], ticks: FloatArray
-) -> tuple[FloatArray, np.ndarray, FloatArray]:
-    """All sample and tick times in order: (time, sensor index or -1 for a tick, value)."""
+) -> tuple[FloatArray, np.ndarray, FloatArray, np.ndarray]:
+    """All sample and tick times in order: (time, sensor index or -1 for a tick, value, and
+    each event's position in its sensor's samples)."""
     times = [ticks] + [s[0] for s in samples]
     which = [np.full(ticks.size, -1)] + [np.full(s[0].size, i) for i, s in enumerate(samples)]
     values = [np.full(ticks.size, np.nan)] + [s[1] for s in samples]
+    position = [np.arange(ticks.size)] + [np.arange(s[0].size) for s in samples]
     t = np.concatenate(times)
     who = np.concatenate(which)
     # at equal times the tick comes last: it reports the state after its instant's samples
     order = np.lexsort((who == -1, t))
-    return t[order], who[order], np.concatenate(values)[order]
+    return t[order], who[order], np.concatenate(values)[order], np.concatenate(position)[order]
 
 
-def _mean_accel(accel: tuple[FloatArray, FloatArray] | None, t: FloatArray) -> FloatArray:
-    """The mean of ``a`` over each interval between consecutive event times (0 without IMU)."""
-    if accel is None or accel[0].size < 2:
-        return np.zeros(t.size)
-    ta, a = accel
-    order = np.argsort(ta, kind="stable")
-    ta, a = ta[order], a[order]
-    # cumulative trapezoid integral of a, evaluated at the event times (flat outside the IMU span)
-    integral = np.concatenate(([0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) * np.diff(ta))))
-    at_events = np.interp(t, ta, integral)
+def _interval_mean(series: tuple[FloatArray, FloatArray], t: FloatArray) -> FloatArray:
+    """The mean of a sampled signal over each interval between consecutive times ``t`` (the
+    samples integrated exactly, trapezoids); NaN where ``t`` leaves the samples' span."""
+    ts, v = series
+    order = np.argsort(ts, kind="stable")
+    ts, v = ts[order], v[order]
+    integral = np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))))
+    at_events = np.interp(t, ts, integral)
     dt = np.diff(t, prepend=t[0])
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.diff(at_events, prepend=at_events[0]) / dt
-    mean[~np.isfinite(mean)] = 0.0
-    outside = (t < ta[0]) | (t > ta[-1])
-    mean[outside] = 0.0
+    mean[~np.isfinite(mean) | (t < ts[0]) | (t > ts[-1])] = np.nan
     return np.asarray(mean)
+
+
+def _thermal(
+    temperatures: Sequence[tuple[FloatArray, FloatArray] | None] | None,
+    samples: Sequence[tuple[FloatArray, FloatArray]],
+    who: np.ndarray,
+    position: np.ndarray,
+    m: int,
+) -> tuple[np.ndarray, FloatArray]:
+    """Each sensor's temperature-coefficient state index (-1: none) and each event's temperature
+    less the sensor's first one [degC] (0 for the others)."""
+    tstate = np.full(m, -1)
+    dtemp = np.zeros(who.size)
+    for i, temp in enumerate(temperatures or [None] * m):
+        if temp is None or temp[0].size < 2 or not samples[i][0].size:
+            continue
+        order = np.argsort(temp[0], kind="stable")
+        at_samples = np.interp(samples[i][0], temp[0][order], temp[1][order])
+        tstate[i] = 3 + m + int((tstate >= 0).sum())
+        mine = who == i
+        dtemp[mine] = (at_samples - at_samples[0])[position[mine]]
+    return tstate, dtemp
 
 
 def _transition(dt: float, n: int, use_bias: bool) -> FloatArray:
@@ -171,13 +240,20 @@ def _run(
     use_bias: bool,
     gate: float,
     x0: FloatArray,
+    still: np.ndarray,
+    thermal: tuple[np.ndarray, FloatArray],
 ) -> dict[str, np.ndarray]:
     """Forward filter and RTS pass over the events; the smoothed states and their diagnostics.
 
-    ``sign`` is +1 for a sensor measuring ``h + c_i``, -1 for one measuring ``h - c_i``.
+    ``sign`` is +1 for a sensor measuring ``h + c_i``, -1 for one measuring ``h - c_i``; ``r``
+    each event's measurement variance; ``q_state`` (events, m) the sensor states' random-walk
+    densities over the interval ending at each event; ``still`` marks the events at which the
+    vehicle is known to stand at the take-off point; ``thermal`` gives each sensor's temperature
+    coefficient state (-1: none) and each event's temperature change.
     """
     m = sign.size
-    n = 3 + m
+    tstate, dtemp = thermal
+    n = 3 + m + int((tstate >= 0).sum())
     count = t.size
     xp = np.zeros((count, n))
     pp = np.zeros((count, n, n))
@@ -187,7 +263,11 @@ def _run(
     accepted = np.zeros(count, dtype=bool)
     x = x0.copy()
     # without the accelerometer the bias is inert: a tiny fixed variance keeps P invertible
-    p = np.diag([10.0**2, 3.0**2, 0.1**2 if use_bias else 1e-9] + [1.0**2] * m)
+    p = np.diag(
+        [10.0**2, 3.0**2, 0.1**2 if use_bias else 1e-9]
+        + [1.0**2] * m
+        + [THERMAL_PRIOR**2] * (n - 3 - m)
+    )
     previous = t[0]
     for k in range(count):
         dt = t[k] - previous
@@ -201,7 +281,7 @@ def _run(
             q[0, 0], q[0, 1], q[1, 1] = q_accel * dt**3 / 3, q_accel * dt**2 / 2, q_accel * dt
             q[1, 0] = q[0, 1]
             q[2, 2] = Q_BIAS * dt if use_bias else 0.0
-            q[3:, 3:] = np.diag(q_state * dt)
+            q[3 : 3 + m, 3 : 3 + m] = np.diag(q_state[k] * dt)
             p = f @ p @ f.T + q
         xp[k], pp[k] = x, p
         i = who[k]
@@ -209,15 +289,24 @@ def _run(
             # H: h plus the sensor's offset (GPS, baro) or minus its ground height (rangefinder)
             hrow = np.zeros(n)
             hrow[0], hrow[3 + i] = 1.0, sign[i]
+            if tstate[i] >= 0:
+                hrow[tstate[i]] = dtemp[k]
             y = z[k] - hrow @ x
             ph = p @ hrow
-            s = hrow @ ph + r[i]
+            s = hrow @ ph + r[k]
             if y * y <= gate * gate * s:  # innovation gate
                 kg = ph / s
                 x = x + kg * y
                 p = p - np.outer(kg, ph)
                 gain_h[k] = abs(kg[0])
                 accepted[k] = True
+        if still[k]:
+            # on the ground before take-off: h = 0 and v = 0 (the datum's definition)
+            for j in (0, 1):
+                s = p[j, j] + STILL_SIGMA**2
+                kg = p[:, j] / s
+                x = x - kg * x[j]
+                p = p - np.outer(kg, p[j])
         xf[k], pf[k] = x, p
     # Rauch-Tung-Striebel: x_s(k) = x_f(k) + C (x_s(k+1) - x_p(k+1)), C = P_f F^T P_p(k+1)^-1
     xs, ps = xf.copy(), pf.copy()
@@ -229,6 +318,62 @@ def _run(
     return {"x": xs, "p": ps, "gain_h": gain_h, "accepted": accepted}
 
 
+def _checked(
+    values: dict[str, float] | None, names: Sequence[str], option: str, unit: str
+) -> dict[str, float]:
+    """Per-sensor overrides, checked: known names, positive finite numbers."""
+    given = dict(values or {})
+    unknown = sorted(set(given) - set(names))
+    if unknown:
+        raise ParameterError(f"{option} names no sensor of this log: {', '.join(unknown)}")
+    if any(not (math.isfinite(v) and v > 0) for v in given.values()):
+        raise ParameterError(f"{option} values must be positive numbers ({unit})")
+    return given
+
+
+def _state_noise(
+    z: FloatArray,
+    t: FloatArray,
+    kinds: Sequence[str],
+    names: Sequence[str],
+    times: FloatArray,
+    speed: tuple[FloatArray, FloatArray] | None,
+    given: dict[str, float],
+) -> tuple[FloatArray, dict[str, float]]:
+    """Random-walk densities of the sensor states over each event interval (events, m), and each
+    rangefinder's terrain roughness [m^2/m] by name, for the record.
+
+    ``given`` (by sensor name) overrides. GPS and barometer offsets: ``Q_OFFSET``, constant. A
+    rangefinder's ground height changes as the vehicle flies over the ground: ``q dx`` per
+    distance ``dx`` flown (``q`` by :func:`terrain_noise` against the quietest other sensor) plus
+    ``Q_GROUND_STILL`` in time; without a speed, ``Q_OFFSET["rangefinder"]`` in time.
+    """
+    q_time = np.array([given.get(n, Q_OFFSET[k]) for n, k in zip(names, kinds, strict=True)])
+    q_events = np.tile(q_time, (times.size, 1))
+    terrain: dict[str, float] = {}
+    ranges = [i for i, k in enumerate(kinds) if k == "rangefinder" and names[i] not in given]
+    if speed is None or speed[0].size < 2 or not ranges:
+        return q_events, terrain
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.1
+    v = (speed[0], np.clip(speed[1], 0.0, MAX_SPEED_M_S))
+    flown_speed = _interval_mean(v, t)
+    flown = np.cumsum(np.nan_to_num(flown_speed) * np.diff(t, prepend=t[0]))
+    flown[np.isnan(flown_speed)] = np.nan
+    speed_events = _interval_mean(v, times)
+    noise = [measurement_sigma(col[np.isfinite(col)]) for col in z.T]
+    others = [j for j, k in enumerate(kinds) if k != "rangefinder"]
+    for i in ranges:
+        q_m = math.nan
+        if others:
+            j = min(others, key=lambda j: noise[j])
+            q_m = terrain_noise(z[:, j] - z[:, i], flown, max(1, round(1.0 / dt)))
+        q_m = Q_TERRAIN_PER_M if not math.isfinite(q_m) else min(q_m, Q_TERRAIN_MAX)
+        terrain[names[i]] = q_m
+        moving = q_m * speed_events + Q_GROUND_STILL
+        q_events[:, i] = np.where(np.isfinite(speed_events), moving, q_time[i])
+    return q_events, terrain
+
+
 def fuse_smoother(
     z: FloatArray,
     *,
@@ -237,16 +382,21 @@ def fuse_smoother(
     names: Sequence[str],
     t: FloatArray,
     accel: tuple[FloatArray, FloatArray] | None = None,
+    speed: tuple[FloatArray, FloatArray] | None = None,
     accel_noise: float | None = None,
     sigmas: dict[str, float] | None = None,
     gate: float = DEFAULT_GATE,
+    on_ground: tuple[float, float] | None = None,
+    temperatures: Sequence[tuple[FloatArray, FloatArray] | None] | None = None,
+    offset_noises: dict[str, float] | None = None,
 ) -> FusionResult:
     """Kalman filter + RTS smoother over the whole flight (see the module doc).
 
     Parameters
     ----------
     z
-        The sensors on the clock (T, n): used only to mark the ticks where no sensor is valid.
+        The sensors on the clock (T, n): marks the ticks where no sensor is valid, and gives the
+        noise densities of the sensors' states.
     samples
         Each sensor's own samples (time [s], height above take-off [m]), in ``z``'s order.
     kinds
@@ -256,15 +406,27 @@ def fuse_smoother(
     accel
         Earth-frame vertical acceleration samples (time [s], [m/s^2]) with the at-rest reading
         removed; ``None``: the altitude-only random-walk model.
+    speed
+        Horizontal speed over ground samples (time [s], [m/s]); ``None``: unknown.
     names
         Each sensor's name, for ``sigmas``.
     accel_noise
-        White acceleration PSD [m^2/s^3]; default ``Q_ACCEL``, or ``Q_ACCEL_NO_IMU`` without IMU.
+        White acceleration PSD [m^2/s^3]; default: from the accelerometer's own noise
+        (:func:`accel_psd`), ``Q_ACCEL_NO_IMU`` without IMU.
     sigmas
-        Measurement noise [m] by sensor name; the others are estimated from the log (second
-        differences, then EM).
+        Measurement noise [m] by sensor name; the others are estimated from the log (running
+        second differences, then EM).
     gate
         Innovation gate [standard deviations].
+    on_ground
+        A time span [s] in which the vehicle stood at the take-off point (the datum's ground
+        window before a detected take-off): there ``h = 0`` and ``v = 0``. ``None``: unknown.
+    temperatures
+        Each sensor's temperature samples (time [s], [degC]) or None, in ``z``'s order: a
+        barometer with them gets a temperature coefficient in its model.
+    offset_noises
+        Random-walk density [m^2/s] of a sensor's offset (or a rangefinder's ground height) by
+        sensor name, in place of the defaults (see :func:`_state_noise`).
     """
     if not (math.isfinite(gate) and gate > 0):
         raise ParameterError(f"--gate must be a positive number of sigmas, got {gate}")
@@ -272,46 +434,61 @@ def fuse_smoother(
         raise ParameterError(f"--accel-noise must be positive (m^2/s^3), got {accel_noise}")
     m = len(samples)
     use_imu = accel is not None and accel[0].size >= 2
-    q_accel = accel_noise if accel_noise is not None else (Q_ACCEL if use_imu else Q_ACCEL_NO_IMU)
-    given = dict(sigmas or {})
-    unknown = sorted(set(given) - set(names))
-    if unknown:
-        raise ParameterError(f"--sigma names no sensor of this log: {', '.join(unknown)}")
-    if any(not (math.isfinite(v) and v > 0) for v in given.values()):
-        raise ParameterError("--sigma values must be positive numbers of metres")
-    sigma = np.array(
-        [given.get(name, measurement_sigma(s[1])) for name, s in zip(names, samples, strict=True)]
-    )
+    q_accel = Q_ACCEL_NO_IMU
+    if accel_noise is not None:
+        q_accel = accel_noise
+    elif use_imu and accel is not None:
+        q_accel = accel_psd(*accel)
+    given = _checked(sigmas, names, "--sigma", "metres")
+    times, who, values, position = _events(samples, t)
+    # each sample's variance: the local noise of its sensor times a scale refined by EM
+    local = [
+        np.full(s[1].size, given[name]) if name in given else local_sigma(*s)
+        for name, s in zip(names, samples, strict=True)
+    ]
+    base = np.ones(times.size)
+    for i in range(m):
+        mine = who == i
+        base[mine] = local[i][position[mine]] ** 2
+    scale = np.ones(m)
     fixed = np.array([name in given for name in names])
-    times, who, values = _events(samples, t)
-    a = _mean_accel(accel if use_imu else None, times)
+    still = np.zeros(times.size, dtype=bool)
+    if on_ground is not None:
+        still = (who == -1) & (times >= on_ground[0]) & (times <= on_ground[1])
+    a = np.zeros(times.size)
+    if use_imu and accel is not None:
+        a = np.nan_to_num(_interval_mean(accel, times))
     first = [s[1][0] for s in samples if s[1].size]
-    x0 = np.zeros(3 + m)
+    tstate, dtemp = _thermal(temperatures, samples, who, position, m)
+    x0 = np.zeros(3 + m + int((tstate >= 0).sum()))
     x0[0] = float(np.median(first)) if first else 0.0
-    r = sigma**2
-    moments = offset_noise(z, float(np.median(np.diff(t))) if t.size > 1 else 0.1)
-    q_state = np.array(
-        [
-            Q_OFFSET.get(k, 0.02) if not np.isfinite(q) else q
-            for k, q in zip(kinds, moments, strict=True)
-        ]
-    )
-    q_state = np.clip(q_state, Q_STATE_MIN, Q_STATE_MAX)
+    q_given = _checked(offset_noises, names, "--offset-noise", "m^2/s")
+    q_events, terrain = _state_noise(z, t, kinds, names, times, speed, q_given)
     sign = np.array([-1.0 if k == "rangefinder" else 1.0 for k in kinds])
+    sensor_of = np.maximum(who, 0)
     for npass in range(EM_PASSES + 1):
-        out = _run(times, who, values, a, sign, r, q_accel, q_state, use_imu, gate, x0)
+        r = base * scale[sensor_of]
+        out = _run(
+            times, who, values, a, sign, r, q_accel, q_events, use_imu, gate, x0, still,
+            (tstate, dtemp),
+        )  # fmt: skip
         if npass == EM_PASSES:
             break
-        # EM, M-step: the measurement variances from the smoothed residuals
+        # EM, M-step: each sensor's noise scale from the smoothed residuals
         xs, ps = out["x"], out["p"]
         for i in range(m):
             mine = (who == i) & out["accepted"]
-            if not mine.any():
+            if fixed[i] or not mine.any():
                 continue
-            resid = values[mine] - xs[mine, 0] - sign[i] * xs[mine, 3 + i]
-            var_h = ps[mine, 0, 0] + ps[mine, 3 + i, 3 + i] + 2 * sign[i] * ps[mine, 0, 3 + i]
-            if not fixed[i]:
-                r[i] = max(float(np.mean(resid**2 + var_h)), _MIN_SIGMA_M**2)
+            # the measurement model's rows at these events: coefficients on (h, c_i, k_i)
+            cols = [0, 3 + i] + ([int(tstate[i])] if tstate[i] >= 0 else [])
+            coef = np.column_stack(
+                [np.ones(mine.sum()), np.full(mine.sum(), sign[i])]
+                + ([dtemp[mine]] if tstate[i] >= 0 else [])
+            )
+            resid = values[mine] - np.einsum("ka,ka->k", coef, xs[mine][:, cols])
+            var_h = np.einsum("ka,kab,kb->k", coef, ps[mine][:, cols][:, :, cols], coef)
+            scale[i] = max(float(np.mean((resid**2 + var_h) / base[mine])), 1e-4)
 
     tick = who == -1
     xs, ps = out["x"][tick], out["p"][tick]
@@ -330,7 +507,14 @@ def fuse_smoother(
     for k in range(1, t.size):
         if not np.isfinite(weights[k]).all():
             weights[k] = weights[k - 1]
-    weights = np.where(valid[:, None], np.nan_to_num(weights, nan=1.0 / m), np.nan)
+    # only the sensors valid at a tick on the clock
+    present = np.isfinite(z)
+    weights = np.where(present, np.nan_to_num(weights), 0.0)
+    total = weights.sum(axis=1, keepdims=True)
+    even = present / np.maximum(present.sum(axis=1, keepdims=True), 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        weights = np.where(total > 0, weights / total, even)
+    weights = np.where(valid[:, None], weights, np.nan)
     fused = np.where(valid, xs[:, 0], np.nan)
     rejected = {
         f"rejected_{name}": int(((who == i) & ~out["accepted"]).sum())
@@ -338,12 +522,13 @@ def fuse_smoother(
     }
     n_valid = np.isfinite(z).sum(axis=1)
     status = np.where(n_valid == 1, SINGLE, np.where(valid, FUSED, NONE))
+    sensor_q = np.median(q_events, axis=0)
     return FusionResult(
         method="smoother",
         fused=fused,
         weights=weights,
         status=status,
-        traces={"offset": xs[:, 3:]},
+        traces={"offset": xs[:, 3 : 3 + m]},
         tick_traces={
             "fused_std": np.where(valid, np.sqrt(np.maximum(ps[:, 0, 0], 0.0)), np.nan),
             "velocity": xs[:, 1],
@@ -353,8 +538,18 @@ def fuse_smoother(
             "model": "accelerometer-driven" if use_imu else "altitude-only random walk (no IMU)",
             "accel_noise_m2_s3": q_accel,
             "gate_sigma": gate,
-            **{f"sigma_{name}_m": float(math.sqrt(r[i])) for i, name in enumerate(names)},
-            **{f"q_offset_{name}_m2_s": float(q_state[i]) for i, name in enumerate(names)},
+            **{
+                f"sigma_{name}_m": float(np.median(np.sqrt(base[who == i] * scale[i])))
+                for i, name in enumerate(names)
+                if (who == i).any()
+            },
+            **{f"q_offset_{name}_m2_s": float(sensor_q[i]) for i, name in enumerate(names)},
+            **{
+                f"thermal_{name}_m_per_degC": float(xs[-1, tstate[i]])
+                for i, name in enumerate(names)
+                if tstate[i] >= 0
+            },
+            **{f"q_terrain_{name}_m2_m": value for name, value in terrain.items()},
             **rejected,
         },
     )
