@@ -78,10 +78,8 @@ class Referred:
         take-off."""
         if self.takeoff_s is None:
             return None
-        lo, hi = (
-            self.ground_window_s[0],
-            min(self.ground_window_s[1], self.takeoff_s - STILL_MARGIN_S),
-        )
+        lo, hi = self.ground_window_s
+        hi = min(hi, self.takeoff_s - STILL_MARGIN_S)
         return (lo, hi) if hi > lo else None
 
 

@@ -114,14 +114,19 @@ NOISE_WINDOW_S = 5.0
 Q_TERRAIN_MAX = 1.0
 MAX_SPEED_M_S = 100.0
 _MIN_SIGMA_M = 0.01
+_MAD_TO_SIGMA = 1.4826
+
+
+def _mad_sigma(x: FloatArray) -> float:
+    """The standard deviation of normal ``x`` from its median absolute deviation."""
+    return _MAD_TO_SIGMA * float(np.median(np.abs(x - np.median(x))))
 
 
 def measurement_sigma(z: FloatArray) -> float:
     """Noise of one sensor [m] from the median absolute second difference of its samples."""
     if z.size < 5:
         return 1.0
-    d2 = np.diff(z, 2)
-    return max(1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0), _MIN_SIGMA_M)
+    return max(_mad_sigma(np.diff(z, 2)) / math.sqrt(6.0), _MIN_SIGMA_M)
 
 
 def accel_psd(t: FloatArray, a: FloatArray) -> float:
@@ -130,8 +135,7 @@ def accel_psd(t: FloatArray, a: FloatArray) -> float:
     ``Q_ACCEL_MIN`` (vibration and attitude errors the spread does not show)."""
     if a.size < 10:
         return Q_ACCEL
-    d = np.diff(a)
-    sigma = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0)
+    sigma = _mad_sigma(np.diff(a)) / math.sqrt(2.0)
     return max(sigma**2 * float(np.median(np.diff(t))), Q_ACCEL_MIN)
 
 
@@ -144,7 +148,7 @@ def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) 
     d2 = np.concatenate(([d2[0]], d2, [d2[-1]]))
     width = max(5, round(window_s / float(np.median(np.diff(t)) or 1.0)))
     med = pd.Series(d2).rolling(width, center=True, min_periods=3).median().to_numpy()
-    return np.asarray(np.maximum(1.4826 * med / math.sqrt(6.0), _MIN_SIGMA_M))
+    return np.asarray(np.maximum(_MAD_TO_SIGMA * med / math.sqrt(6.0), _MIN_SIGMA_M))
 
 
 def terrain_noise(d: FloatArray, flown: FloatArray, lag: int) -> float:
@@ -409,7 +413,7 @@ def fuse_smoother(
     speed
         Horizontal speed over ground samples (time [s], [m/s]); ``None``: unknown.
     names
-        Each sensor's name, for ``sigmas``.
+        Each sensor's name, for ``sigmas`` and ``offset_noises``.
     accel_noise
         White acceleration PSD [m^2/s^3]; default: from the accelerometer's own noise
         (:func:`accel_psd`), ``Q_ACCEL_NO_IMU`` without IMU.
@@ -507,7 +511,8 @@ def fuse_smoother(
     for k in range(1, t.size):
         if not np.isfinite(weights[k]).all():
             weights[k] = weights[k - 1]
-    # only the sensors valid at a tick on the clock
+    # a sensor absent from the clock at a tick (a gap longer than --max-gap) gets no weight there,
+    # though its samples near the gap still informed the smoother
     present = np.isfinite(z)
     weights = np.where(present, np.nan_to_num(weights), 0.0)
     total = weights.sum(axis=1, keepdims=True)
