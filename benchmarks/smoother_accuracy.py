@@ -14,8 +14,7 @@ from __future__ import annotations
 import argparse
 from concurrent.futures import ProcessPoolExecutor
 
-from altfuse.accuracy import flights, label, measure
-from altfuse.fuse import FUSERS
+from altfuse.accuracy import best_other, flights, label, measure
 
 
 def main() -> None:
@@ -26,11 +25,10 @@ def main() -> None:
     todo = flights(args.seeds)
     with ProcessPoolExecutor(args.jobs) as pool:
         rows = list(pool.map(measure, todo))
-    others = [m for m in FUSERS if m != "smoother"]
     print(f"{'flight':46s} {'smoother':>8s} {'cover':>6s}  best other")
     wins, inside, ticks = 0, 0.0, 0.0
     for flight, row in zip(todo, rows, strict=True):
-        best = min(others, key=lambda m: row[m])
+        best = best_other(row)
         wins += row["smoother"] < row[best]
         inside, ticks = inside + row["inside"], ticks + row["ticks"]
         print(

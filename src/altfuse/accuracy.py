@@ -57,6 +57,11 @@ def measure(flight: Flight) -> dict[str, float]:
     return row
 
 
+def best_other(row: dict[str, float]) -> str:
+    """The method other than the smoother with the lowest RMSE in a :func:`measure` row."""
+    return min((m for m in FUSERS if m != "smoother"), key=lambda m: row[m])
+
+
 def label(flight: Flight) -> str:
     scenario, seed, faults = flight
     return f"{scenario} seed {seed}" + (f" {'+'.join(faults)}" if faults else "")

@@ -255,6 +255,12 @@ class _Layout:
     def n(self) -> int:
         return 3 + self.sign.size + int((self.thermal >= 0).sum() + (self.drift >= 0).sum())
 
+    @property
+    def drift_pairs(self) -> np.ndarray:
+        """(offset state, its drift-rate state) per drifting sensor, shape (k, 2)."""
+        drifting = np.flatnonzero(self.drift >= 0)
+        return np.column_stack([3 + drifting, self.drift[drifting]])
+
     def with_drift(self, kinds: Sequence[str]) -> _Layout:
         """The same with a drift-rate state for each barometer."""
         drift = np.full(self.sign.size, -1)
@@ -298,11 +304,9 @@ def _run(
     Also each accepted sample's log-likelihood (its innovation's density; NaN elsewhere): the
     evidence by which :func:`_drift_gain` compares two models.
     """
-    sign, tstate, dtemp, rstate = layout.sign, layout.thermal, layout.dtemp, layout.drift
+    sign, tstate, dtemp, drifts = layout.sign, layout.thermal, layout.dtemp, layout.drift_pairs
     m, n = sign.size, layout.n
     n_thermal = int((tstate >= 0).sum())
-    drifts = np.array([(3 + i, rstate[i]) for i in range(m) if rstate[i] >= 0], dtype=int)
-    drifts = drifts.reshape(-1, 2)
     count = t.size
     loglik = np.full(count, np.nan)
     xp = np.zeros((count, n))
@@ -385,7 +389,7 @@ def _drift_gain(without: dict[str, np.ndarray], with_drift: dict[str, np.ndarray
     would credit whichever model explains away a departure (Paper A's barometer excursion), and
     one whose offset drifts then lets ``h`` wander once no third sensor holds it. A model that
     explains the data better has no need to reject more of it: the drift model did, by up to
-    90 samples of a rangefinder returning from a dropout, on flights where it had gone astray.
+    94 samples of a rangefinder returning from a dropout, on flights where it had gone astray.
     """
     if with_drift["accepted"].sum() < without["accepted"].sum():
         return -math.inf
@@ -400,8 +404,7 @@ def _drift_record(layout: _Layout, gain: float) -> dict[str, float | int | str]:
     if not math.isfinite(gain):
         return {"baro_drift": "not modelled (it rejected more samples than the stable model)"}
     verdict = "modelled" if (layout.drift >= 0).any() else "not modelled"
-    record: dict[str, float | int | str] = {"baro_drift": verdict, "baro_drift_loglik_gain": gain}
-    return record
+    return {"baro_drift": verdict, "baro_drift_loglik_gain": gain}
 
 
 def _checked(
@@ -563,9 +566,10 @@ def fuse_smoother(
     # a barometer that drifts: its offset gets a drift rate if the log's evidence asks for it
     drift_gain = math.nan
     if "baro" in kinds:
-        drift_gain = _drift_gain(run(layout, False), run(layout.with_drift(kinds), False))
+        drifting = layout.with_drift(kinds)
+        drift_gain = _drift_gain(run(layout, False), run(drifting, False))
         if drift_gain > DRIFT_GAIN:
-            layout = layout.with_drift(kinds)
+            layout = drifting
     for npass in range(EM_PASSES + 1):
         out = run(layout)
         if npass == EM_PASSES:
