@@ -2,7 +2,7 @@
 
 Run on demand:  python benchmarks/smoother_accuracy.py [--seeds 0 1 2] [--jobs 2]
 
-Flights (:func:`altfuse.accuracy.flights`): every ``altfuse simulate`` scenario with each seed,
+Flights (``tests/accuracy.py``'s ``flights``): every ``altfuse simulate`` scenario with each seed,
 without fault, with each fault, and the mission with a GPS glitch and a rangefinder dropout
 together. Prints one row per flight (the smoother's RMSE [m], the share of its ticks whose true
 error lies within +-2 sigma, the best other method), and a last line: on how many flights the
@@ -12,9 +12,13 @@ smoother has the lowest RMSE, and its pooled coverage.
 from __future__ import annotations
 
 import argparse
+import sys
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
-from altfuse.accuracy import best_other, flights, label, measure
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from accuracy import best_other, flights, label, measure
 
 
 def main() -> None:

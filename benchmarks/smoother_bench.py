@@ -15,32 +15,31 @@ import time
 
 import numpy as np
 
-from altfuse.fuse.smoother import fuse_smoother
+from altfuse.fuse import FusionInput
+from altfuse.fuse.smoother import SmootherParams, fuse_smoother
+from altfuse.inertial import VerticalAcceleration
+from altfuse.model import Samples, SensorKind
 
 
-def flight(minutes: float, seed: int = 0) -> dict[str, object]:
+def flight(minutes: float, seed: int = 0) -> FusionInput:
     rng = np.random.default_rng(seed)
     duration = minutes * 60.0
 
     def truth(t: np.ndarray) -> np.ndarray:
         return np.asarray(20 * (1 - np.cos(2 * np.pi * t / 300)) + 2 * np.sin(t / 7))
 
-    samples, kinds = [], ("gps", "baro", "rangefinder")
+    samples: list[Samples] = []
+    kinds: tuple[SensorKind, ...] = ("gps", "baro", "rangefinder")
     for rate, sigma in ((5.0, 0.7), (20.0, 0.1), (20.0, 0.03)):
         t = np.arange(0, duration, 1 / rate)
-        samples.append((t, truth(t) + rng.normal(0, sigma, t.size)))
+        samples.append(Samples(t, truth(t) + rng.normal(0, sigma, t.size)))
     ti = np.arange(0, duration, 1 / 400)
     accel = np.gradient(np.gradient(truth(ti), ti), ti) + 0.05 + rng.normal(0, 0.2, ti.size)
     ticks = np.arange(0, duration, 0.1)
     z = np.column_stack([np.interp(ticks, t, v) for t, v in samples])
-    return {
-        "z": z,
-        "samples": samples,
-        "kinds": kinds,
-        "names": kinds,
-        "t": ticks,
-        "accel": (ti, accel),
-    }
+    on_clock = np.interp(ticks, ti, accel)
+    vertical = VerticalAcceleration(Samples(ti, accel), on_clock, {})
+    return FusionInput(ticks, z, kinds, kinds, tuple(samples), 0.1, accel=vertical)
 
 
 def main() -> None:
@@ -49,9 +48,9 @@ def main() -> None:
     args = parser.parse_args()
     for minutes in args.minutes:
         data = flight(minutes)
-        events = sum(s[0].size for s in data["samples"]) + data["t"].size  # type: ignore[union-attr,attr-defined]
+        events = sum(s.t.size for s in data.samples) + data.t.size
         started = time.perf_counter()
-        res = fuse_smoother(data.pop("z"), **data)  # type: ignore[arg-type]
+        res = fuse_smoother(data, SmootherParams())
         wall = time.perf_counter() - started
         print(
             f"{minutes:5.0f} min: {events:,} events, 400 Hz IMU ({int(minutes * 60 * 400):,} "

@@ -28,8 +28,10 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from altfuse.align import align  # noqa: E402
 from altfuse.datum import refer_to_takeoff  # noqa: E402
-from altfuse.fuse.support import auto_alpha, fuse_support  # noqa: E402
+from altfuse.fuse import FusionInput, FusionResult  # noqa: E402
+from altfuse.fuse.support import SupportParams, auto_alpha, fuse_support  # noqa: E402
 from altfuse.io import read_log  # noqa: E402
+from altfuse.screen import screen  # noqa: E402
 from altfuse.simulate import HOME_AMSL_M  # noqa: E402
 from conftest import paper_a_flight  # noqa: E402
 
@@ -45,8 +47,14 @@ def rmse(x: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt(np.nanmean(e**2)))
 
 
+def support(z: np.ndarray, alpha: float, beta: float, k: int) -> FusionResult:
+    """Paper A on heights on a 10 Hz clock, with a window of ``k`` ticks."""
+    params = SupportParams(alpha_per_m2=alpha, beta=beta, window_s=k * 0.1)
+    return fuse_support(FusionInput.from_heights(z, 0.1), params)
+
+
 def referred_case(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    flight = read_log(path)
+    flight = screen(read_log(path))
     ref = refer_to_takeoff(align(flight.sensors))
     refs = {r.name: r for r in flight.references}
     truth_series = refs.get("sim") or refs.get("ekf") or refs["ctun"]
@@ -76,12 +84,12 @@ def main() -> None:
     ):
         whole, dep = [], []
         for f in flights:
-            res = fuse_support(f.z, alpha=scale * auto_alpha(f.z), beta=beta, window=k)
+            res = support(f.z, scale * auto_alpha(f.z), beta, k)
             whole.append(rmse(res.fused, f.truth))
             dep.append(rmse(res.fused[f.baro_departs], f.truth[f.baro_departs]))
         row = [scale, beta, k, np.mean(whole), np.mean(dep)]
         for h, truth in cases.values():
-            res = fuse_support(h, alpha=scale * auto_alpha(h), beta=beta, window=k)
+            res = support(h, scale * auto_alpha(h), beta, k)
             row.append(rmse(res.fused, truth))
         print(" ".join(f"{v:>10.4g}" for v in row))
     base = []

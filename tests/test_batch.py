@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import filecmp
+import json
 import os
 import shutil
 import signal
@@ -18,6 +19,8 @@ from click.testing import CliRunner
 from altfuse.batch import EXIT_PARTIAL, BatchOptions, find_logs, run_batch
 from altfuse.cli import cli
 from altfuse.errors import LogReadError, ParameterError
+from altfuse.evaluation import evaluate
+from altfuse.fuse.support import SupportParams
 from altfuse.pipeline import FuseOptions
 from conftest import ROOT, shared_log
 
@@ -229,3 +232,25 @@ def test_skip_existing_redoes_changed_inputs_and_options(tmp_path: Path) -> None
     assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["ok"]
     (out / "m.csv").unlink()  # an output lost
     assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["ok"]
+
+
+def test_method_parameters_pass_through_a_batch(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    args = ["batch", str(SAMPLES / "paper_a.bin"), "-o", str(out), "--jobs", "1"]
+    result = CliRunner().invoke(cli, [*args, "-m", "support", "--alpha", "0.5", "--evaluate"])
+    assert result.exit_code == 0, result.output
+    meta = json.loads((out / "paper_a.meta.json").read_text())
+    assert meta["parameters"]["alpha_per_m2"] == 0.5
+    assert meta["parameters"]["alpha_source"] == "option"
+    assert meta["options"]["params"] == {
+        "support": {"alpha_per_m2": 0.5, "beta": 10.0, "window_s": 0.5}
+    }
+    # the evaluation ran support with alpha 0.5 too: as `evaluate --alpha 0.5` measures it
+    summary = pd.read_csv(out / "summary.csv")
+    given = {"support": SupportParams(alpha_per_m2=0.5)}
+    alone = evaluate(SAMPLES / "paper_a.bin", ["support"], FuseOptions(params=given))
+    assert summary.support_rmse[0] == pytest.approx(alone.rows[0].overall.rmse, abs=1e-6)
+    assert summary.support_rmse[0] != pytest.approx(0.2355, abs=1e-3)  # the default's
+    refused = CliRunner().invoke(cli, [*args, "--force", "-m", "mean", "--alpha", "0.5"])
+    assert refused.exit_code == 2
+    assert "--alpha does not apply to method 'mean'" in refused.stderr

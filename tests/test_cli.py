@@ -13,7 +13,7 @@ from click.testing import CliRunner, Result
 
 from altfuse import __version__
 from altfuse.cli import cli
-from altfuse.fuse import FUSERS
+from altfuse.fuse import METHODS
 from conftest import SAMPLE_LOG, ardupilot_logs, shared_log
 
 
@@ -68,7 +68,7 @@ def test_fuse_sample_log_writes_csv_weights_and_provenance(tmp_path: Path) -> No
     assert not list(tmp_path.glob(".*tmp"))
 
 
-@pytest.mark.parametrize("method", sorted(FUSERS))
+@pytest.mark.parametrize("method", sorted(METHODS))
 def test_every_method_runs_from_the_cli(tmp_path: Path, method: str) -> None:
     result = run("fuse", SAMPLE_LOG, "-o", tmp_path / "o.csv", "--method", method)
     assert result.exit_code == 0, result.output
@@ -112,18 +112,19 @@ def test_bad_files(tmp_path: Path, case: str, fragment: str) -> None:
 @pytest.mark.parametrize(
     ("args", "fragment"),
     [
-        (["--rate", "0"], "--rate"),
-        (["--rate", "-3"], "--rate"),
-        (["--max-gap", "0"], "--max-gap"),
+        (["--rate", "0"], "--rate must be a positive number, got 0.0"),
+        (["--rate", "-3"], "--rate must be a positive number, got -3.0"),
+        (["--rate", "5000"], "--rate must be at most 1000, got 5000.0"),
+        (["--max-gap", "0"], "--max-gap must be a positive number, got 0.0"),
         (["--method", "kalman"], "'kalman' is not one of"),
-        (["--alpha", "-1"], "--alpha"),
-        (["--alpha", "wide"], "--alpha"),
-        (["--beta", "-1"], "--beta"),
-        (["--window", "-2"], "--window"),
-        (["--min-sensors", "0"], "--min-sensors"),
-        (["--method", "mean", "--beta", "3"], "--beta does not apply"),
+        (["--alpha", "-1"], "--alpha must be a positive number, got -1.0"),
+        (["--alpha", "wide"], "'wide' is neither 'auto' nor a number"),
+        (["--beta", "-1"], "--beta must be a number >= 0, got -1.0"),
+        (["--window", "-2"], "--window must be a number >= 0, got -2.0"),
+        (["--min-sensors", "0"], "--min-sensors must be a whole number >= 1, got 0"),
+        (["--method", "mean", "--beta", "3"], "--beta does not apply to method 'mean'"),
         (["--method", "delay1", "--time-constant", "1"], "--time-constant does not apply"),
-        (["--method", "delay1", "--q", "-1"], "--q"),
+        (["--method", "delay1", "--q", "-1"], "--q must be a number >= 0, got -1.0"),
         (["--method", "delay2", "--form", "exact"], "'exact' is not one of"),
         (["--method", "multilayer", "--time-constant", "0"], "--time-constant"),
         (["--method", "multilayer", "--e-max", "-1"], "--e-max"),

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from altfuse.align import Aligned
 from altfuse.datum import refer_to_takeoff
-from altfuse.errors import ParameterError
-from altfuse.fuse.support import fuse_support
+from altfuse.fuse import FusionInput
+from altfuse.fuse.support import SupportParams, fuse_support
+from altfuse.params import InvalidParameter
+from altfuse.pipeline import FuseOptions
 
 
 def flight(gps_offset: float = 146.0) -> tuple[Aligned, np.ndarray]:
@@ -30,7 +34,7 @@ def flight(gps_offset: float = 146.0) -> tuple[Aligned, np.ndarray]:
 
 def test_offsets_on_the_ground_and_matched_to_the_reference() -> None:
     aligned, h = flight()
-    ref = refer_to_takeoff(aligned, ground_s=5.0, climb_m=1.0)
+    ref = refer_to_takeoff(aligned, ground_window_s=5.0, takeoff_climb_m=1.0)
     assert ref.reference == "baro"
     # h exceeds 1 m (smoothed) at 120.5 s
     assert ref.takeoff_s == pytest.approx(120.5, abs=0.2)
@@ -49,9 +53,9 @@ def test_offsets_on_the_ground_and_matched_to_the_reference() -> None:
 def test_offset_sensor_keeps_its_weight() -> None:
     near, _ = flight(gps_offset=146.0)
     far, _ = flight(gps_offset=2146.0)
-    w_near = fuse_support(refer_to_takeoff(near).h).weights
-    w_far = fuse_support(refer_to_takeoff(far).h).weights
-    np.testing.assert_allclose(w_far, w_near, atol=1e-9)
+    w_near = fuse_support(FusionInput.from_heights(refer_to_takeoff(near).h), SupportParams())
+    w_far = fuse_support(FusionInput.from_heights(refer_to_takeoff(far).h), SupportParams())
+    np.testing.assert_allclose(w_far.weights, w_near.weights, atol=1e-9)
 
 
 def test_no_takeoff_uses_the_first_seconds() -> None:
@@ -78,11 +82,19 @@ def test_sensor_without_any_overlap_is_dropped_with_a_reason() -> None:
     assert "rangefinder" in ref.dropped
 
 
-@pytest.mark.parametrize(("ground_s", "climb_m"), [(0.0, 1.0), (5.0, -1.0), (float("inf"), 1.0)])
-def test_nonsense_parameters(ground_s: float, climb_m: float) -> None:
-    aligned, _ = flight()
-    with pytest.raises(ParameterError):
-        refer_to_takeoff(aligned, ground_s, climb_m)
+@pytest.mark.parametrize(
+    ("ground_s", "climb_m", "name"),
+    [
+        (0.0, 1.0, "ground_window_s"),
+        (5.0, -1.0, "takeoff_climb_m"),
+        (math.inf, 1.0, "ground_window"),
+    ],
+)
+def test_nonsense_parameters_are_refused_by_the_options(
+    ground_s: float, climb_m: float, name: str
+) -> None:
+    with pytest.raises(InvalidParameter, match=f"^{name}.* must be a positive number"):
+        FuseOptions(ground_window_s=ground_s, takeoff_climb_m=climb_m)
 
 
 def test_rangefinder_tilt_correction() -> None:

@@ -5,15 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from altfuse.errors import ParameterError
+from altfuse.fuse import FusionInput
 from altfuse.fuse.delay import (
     VARIANCE_FLOOR_M2,
+    DelayParams,
     fuse_delay1,
     fuse_delay2,
     measurement_variances,
     spatial_weights,
     temporal_fusion,
 )
+from altfuse.params import InvalidParameter
 
 FLOOR = VARIANCE_FLOOR_M2
 
@@ -48,7 +50,7 @@ def test_measurement_variance_is_lost_under_a_moving_signal() -> None:
 def test_one_step_delay_3_2_hand_computed() -> None:
     z = np.array([[10.0], [12.0], [13.0]])
     d = np.array([[1.0], [1.0], [2.0]])
-    zp, pp = temporal_fusion(z, d, steps=1, form="paper")
+    zp, pp = temporal_fusion(z, d, steps=1, form="paper", q=0.0)
     # Z+(2) = (1*10 + 1*12) / 2 = 11, P+(2) = 1*1/2 = 0.5
     # Z+(3) = (2*11 + 0.5*13) / 2.5 = 11.4, P+(3) = 0.5*2/2.5 = 0.4
     np.testing.assert_allclose(zp[:, 0], [10.0, 11.0, 11.4], rtol=1e-12)
@@ -63,7 +65,7 @@ def test_one_step_delay_3_2_hand_computed() -> None:
 def test_two_step_delay_3_3_hand_computed() -> None:
     z = np.array([[10.0], [12.0], [13.0], [14.0]])
     d = np.array([[1.0], [1.0], [2.0], [1.0]])
-    zp, pp = temporal_fusion(z, d, steps=2, form="paper")
+    zp, pp = temporal_fusion(z, d, steps=2, form="paper", q=0.0)
     # Z+(1), Z+(2) from the one-step recursion: 10 (P 1), 11 (P 0.5)
     # k=3: 1/P = 1/2 + 1/0.5 + 1/1 = 3.5; Z = (13/2 + 11/0.5 + 10/1) / 3.5 = 11
     # k=4: 1/P = 1/1 + 3.5 + 1/0.5 = 6.5; Z = (14/1 + 11*3.5 + 11/0.5) / 6.5 = 11.461538
@@ -89,7 +91,7 @@ def test_delay_fusers_combine_temporal_estimates_with_spatial_weights() -> None:
     rng = np.random.default_rng(4)
     z = 50.0 + rng.normal(0.0, 1.0, (300, 2)) * [0.3, 1.2]
     for fuser in (fuse_delay1, fuse_delay2):
-        res = fuser(z)
+        res = fuser(FusionInput.from_heights(z), DelayParams())
         zplus, pplus = res.traces["temporal_estimate"], res.traces["temporal_variance"]
         w = (1 / pplus) / (1 / pplus).sum(axis=1, keepdims=True)
         np.testing.assert_allclose(res.weights, w, rtol=1e-12)
@@ -111,11 +113,11 @@ def climb_and_descend() -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("fuser", [fuse_delay1, fuse_delay2])
 def test_practical_form_tracks_and_paper_form_freezes(fuser) -> None:  # type: ignore[no-untyped-def]
     truth, z = climb_and_descend()
-    practical = fuser(z, form="practical")
+    practical = fuser(FusionInput.from_heights(z), DelayParams(form="practical"))
     rmse = np.sqrt(np.mean((practical.fused - truth) ** 2))
     # measured: delay1 0.71 m, delay2 0.79 m (a random-walk filter lags a 2 m/s climb)
     assert rmse < 1.0
-    paper = fuser(z, form="paper")
+    paper = fuser(FusionInput.from_heights(z), DelayParams(form="paper"))
     # the constant-altitude form freezes: P+ -> 0 and the climb is not followed
     # (measured at the end of the climb: delay1 26.0 m, delay2 -0.6 m; truth 60 m)
     climb_end = 500
@@ -126,8 +128,21 @@ def test_practical_form_tracks_and_paper_form_freezes(fuser) -> None:  # type: i
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "option"), [({"form": "exact"}, "--form"), ({"q": -1.0}, "--q")]
+    ("kwargs", "message"),
+    [
+        ({"form": "exact"}, "form must be one of practical, paper, got 'exact'"),
+        ({"q_m2_s": -1.0}, "q_m2_s must be a number >= 0, got -1.0"),
+    ],
 )
-def test_nonsense_parameters(kwargs: dict[str, object], option: str) -> None:
-    with pytest.raises(ParameterError, match=option):
-        fuse_delay1(np.ones((5, 2)), **kwargs)  # type: ignore[arg-type]
+def test_nonsense_parameters(kwargs: dict[str, object], message: str) -> None:
+    with pytest.raises(InvalidParameter) as caught:
+        DelayParams(**kwargs)  # type: ignore[arg-type]
+    assert str(caught.value) == message
+
+
+def test_process_noise_is_a_density_per_second() -> None:
+    """The same random walk at any rate: q per tick = q_m2_s * dt (0.05 m² at 10 Hz)."""
+    z = climb_and_descend()[1]
+    at_10hz = temporal_fusion(z, measurement_variances(z), 1, "practical", 0.05)
+    fused = fuse_delay1(FusionInput.from_heights(z, 0.1), DelayParams(q_m2_s=0.5))
+    np.testing.assert_array_equal(fused.traces["temporal_estimate"], at_10hz[0])

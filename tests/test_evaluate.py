@@ -12,8 +12,10 @@ from click.testing import CliRunner
 
 from altfuse.cli import cli
 from altfuse.errors import ParameterError
-from altfuse.evaluate import evaluate, parse_segments
+from altfuse.evaluation import evaluate, parse_segments
+from altfuse.fuse.support import SupportParams
 from altfuse.metrics import error_stats
+from altfuse.pipeline import FuseOptions
 from altfuse.simulate import BOOT_S, simulate_flight
 from conftest import ROOT, shared_log
 
@@ -37,7 +39,7 @@ def test_segments_by_length_and_by_boundaries() -> None:
     t = np.arange(0, 101) / 1.0  # 0..100 s
     assert list(parse_segments("40", t).values()) == [(0.0, 40.0), (40.0, 80.0), (80.0, 100.0)]
     assert list(parse_segments("30,70", t).values()) == [(0.0, 30.0), (30.0, 70.0), (70.0, 100.0)]
-    with pytest.raises(ParameterError, match="--segments"):
+    with pytest.raises(ParameterError, match=r"^segments takes seconds or boundaries, got 'soon'"):
         parse_segments("soon", t)
 
 
@@ -97,6 +99,25 @@ def test_asking_for_a_reference_the_log_lacks_fails_in_one_line() -> None:
     result = CliRunner().invoke(cli, ["evaluate", str(PAPER_A), "--truth", "ekf"])
     assert result.exit_code == 1
     assert "no XKF1/NKF1 or CTUN.Alt records" in result.stderr
+
+
+def test_method_parameters_pass_through_evaluate(tmp_path: Path) -> None:
+    reports = {}
+    for extra in ([], ["--alpha", "0.5"]):
+        out = tmp_path / f"report{len(extra)}.json"
+        args = ["evaluate", str(PAPER_A), "--methods", "support,mean", "-o", str(out), *extra]
+        result = CliRunner().invoke(cli, args)
+        assert result.exit_code == 0, result.output
+        rows = json.loads(out.read_text())["rows"]
+        reports[len(extra)] = {r["name"]: r["overall"]["rmse"] for r in rows}
+    given = {"support": SupportParams(alpha_per_m2=0.5)}
+    library = evaluate(PAPER_A, ["support"], FuseOptions(params=given)).rows[0].overall.rmse
+    assert reports[2]["support"] == pytest.approx(library, abs=1e-9)
+    assert reports[2]["support"] != pytest.approx(reports[0]["support"], abs=1e-3)
+    assert reports[2]["mean"] == reports[0]["mean"]  # alpha is support's alone
+    refused = CliRunner().invoke(cli, ["evaluate", str(PAPER_A), "--methods", "mean", "--q", "1"])
+    assert refused.exit_code == 2
+    assert "--q does not apply to method 'mean'" in refused.stderr
 
 
 def test_method_that_cannot_run_is_listed() -> None:

@@ -1,37 +1,35 @@
-"""Contracts every registered fusion method meets (parametrised over FUSERS)."""
+"""Contracts every registered fusion method meets (parametrised over METHODS), and what a new
+method gets by being registered: its CLI options and these tests."""
 
 from __future__ import annotations
 
-import inspect
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
+from click.testing import CliRunner
 
-from altfuse.fuse import FUSERS, LOG_INPUTS, FusionResult
+from altfuse.cli import cli
+from altfuse.fuse import METHODS, FusionInput, FusionResult, Method
 from altfuse.fuse.mean import fuse_mean
+from altfuse.params import UNIT_SUFFIXES, Params, fields, flag_of, unit_of
+from altfuse.pipeline import FuseOptions
+from conftest import ROOT, SAMPLE_LOG
 
-METHODS = sorted(FUSERS)
+NAMES = sorted(METHODS)
 
 
-def call(method: str, z: np.ndarray) -> FusionResult:
-    """Run ``method``, giving it the log inputs it asks for: no acceleration, speed or
-    temperature, a 10 Hz clock, the clock's values as each sensor's samples."""
-    t = np.arange(z.shape[0]) * 0.1
-    n = z.shape[1]
-    inputs = {
-        "accel_up": np.zeros(z.shape[0]),
-        "dt_s": 0.1,
-        "accel": None,
-        "t": t,
-        "samples": [(t[np.isfinite(z[:, i])], z[np.isfinite(z[:, i]), i]) for i in range(n)],
-        "kinds": ("gps", "baro", "rangefinder")[:n],
-        "names": ("gps", "baro", "rangefinder")[:n],
-        "on_ground": None,
-        "speed": None,
-        "temperatures": None,
-    }
-    wanted = set(inspect.signature(FUSERS[method]).parameters) & LOG_INPUTS
-    return FUSERS[method](z, **{k: inputs[k] for k in wanted})
+def call(name: str, z: np.ndarray) -> FusionResult:
+    """Run method ``name`` with its defaults on heights on a 10 Hz clock, each sensor's samples
+    its valid ticks; a method that requires the accelerometer gets a still one."""
+    method = METHODS[name]
+    accel = np.zeros(z.shape[0]) if "accel" in method.requires else None
+    return method(FusionInput.from_heights(z, 0.1, accel_up=accel))
 
 
 @pytest.fixture
@@ -44,10 +42,10 @@ def gappy() -> np.ndarray:
     return z
 
 
-@pytest.mark.parametrize("method", METHODS)
-def test_shapes_weights_and_status(method: str, gappy: np.ndarray) -> None:
-    res = call(method, gappy)
-    assert res.method == method
+@pytest.mark.parametrize("name", NAMES)
+def test_shapes_weights_and_status(name: str, gappy: np.ndarray) -> None:
+    res = call(name, gappy)
+    assert res.method == name
     assert res.fused.shape == (200,)
     assert res.weights.shape == (200, 3)
     valid = np.isfinite(gappy)
@@ -65,24 +63,38 @@ def test_shapes_weights_and_status(method: str, gappy: np.ndarray) -> None:
         assert trace.shape == (200,)
 
 
-@pytest.mark.parametrize("method", METHODS)
-def test_stays_near_the_sensors(method: str, gappy: np.ndarray) -> None:
-    res = call(method, gappy)
+@pytest.mark.parametrize("name", NAMES)
+def test_stays_near_the_sensors(name: str, gappy: np.ndarray) -> None:
+    res = call(name, gappy)
     some = np.isfinite(gappy).any(axis=1)
     assert np.max(np.abs(res.fused[some] - 20.0)) < 1.0  # sensors: 20 m, sigma 0.3 m
 
 
-@pytest.mark.parametrize("method", METHODS)
-def test_beats_the_worst_sensor_on_a_synthetic_truth(method: str, paper_a) -> None:  # type: ignore[no-untyped-def]
-    res = call(method, paper_a.z)
+@pytest.mark.parametrize("name", NAMES)
+def test_beats_the_worst_sensor_on_a_synthetic_truth(name: str, paper_a) -> None:  # type: ignore[no-untyped-def]
+    res = call(name, paper_a.z)
     rmse = np.sqrt(np.mean((res.fused - paper_a.truth) ** 2))
     sensor_rmse = np.sqrt(np.mean((paper_a.z - paper_a.truth[:, None]) ** 2, axis=0))
     assert rmse < sensor_rmse.max()
 
 
-@pytest.mark.parametrize("method", ["mean", "support"])
-def test_instantaneous_methods_stay_within_the_sensors(method: str, gappy: np.ndarray) -> None:
-    res = call(method, gappy)
+@pytest.mark.parametrize("name", NAMES)
+def test_parameters_are_typed_documented_and_on_the_command_line(name: str) -> None:
+    method = METHODS[name]
+    assert issubclass(method.params, Params)
+    defaults = method.params()  # the defaults pass the type's own checks
+    assert FuseOptions(method=name, params={name: defaults}).params_of() == defaults
+    help_text = CliRunner().invoke(cli, ["fuse", "--help"], terminal_width=200).output
+    for f in fields(method.params):
+        assert f.name.endswith(UNIT_SUFFIXES[unit_of(f)]), f"{f.name}: the unit in its name"
+        assert f.metadata["help"]
+        assert flag_of(f) in help_text
+    assert name in help_text
+
+
+@pytest.mark.parametrize("name", ["mean", "support"])
+def test_instantaneous_methods_stay_within_the_sensors(name: str, gappy: np.ndarray) -> None:
+    res = call(name, gappy)
     some = np.isfinite(gappy).any(axis=1)
     lo, hi = np.nanmin(gappy[some], axis=1), np.nanmax(gappy[some], axis=1)
     assert (res.fused[some] >= lo - 1e-9).all()
@@ -92,6 +104,77 @@ def test_instantaneous_methods_stay_within_the_sensors(method: str, gappy: np.nd
 
 def test_mean_is_the_equal_weight_average() -> None:
     z = np.array([[1.0, 2.0, 6.0], [1.0, np.nan, 3.0]])
-    res = fuse_mean(z)
+    res = fuse_mean(FusionInput.from_heights(z), Params())
     np.testing.assert_allclose(res.fused, [3.0, 2.0])
     np.testing.assert_allclose(res.weights[1], [0.5, 0.0, 0.5])
+
+
+#: A new method as a contributor writes it: one module, one registry line.
+TOY_METHOD = """
+from dataclasses import dataclass
+
+import numpy as np
+
+from altfuse.fuse import METHODS, FusionInput, FusionResult, Method
+from altfuse.fuse.base import combine
+from altfuse.params import Params, param
+
+
+@dataclass(frozen=True, kw_only=True)
+class ToyParams(Params):
+    lean_m: float = param(0.0, help="height added to the mean", unit="m")
+
+
+def fuse_toy(inputs: FusionInput, params: ToyParams) -> FusionResult:
+    mean = combine(inputs.z, np.isfinite(inputs.z).astype(float), "toy")
+    return FusionResult("toy", mean.fused + params.lean_m, mean.weights, mean.status)
+
+
+METHODS["toy"] = Method(fuse_toy, ToyParams, "the mean, leaning")
+"""
+
+
+def test_a_registered_method_gets_its_cli_option(tmp_path: Path) -> None:
+    namespace: dict[str, object] = {}
+    exec(compile(TOY_METHOD, "toy_method.py", "exec"), namespace)  # registers "toy"
+    toy = METHODS["toy"]
+    assert isinstance(toy, Method)
+    try:
+        help_text = CliRunner().invoke(cli, ["fuse", "--help"], terminal_width=200).output
+        assert "--lean" in help_text
+        assert "toy: height added to the mean [m] [default: 0]." in help_text
+        out = tmp_path / "toy.csv"
+        args = ["fuse", str(SAMPLE_LOG), "-o", str(out), "-m", "toy", "--lean", "0.5"]
+        result = CliRunner().invoke(cli, args)
+        assert result.exit_code == 0, result.output
+        mean = tmp_path / "mean.csv"
+        args = ["fuse", str(SAMPLE_LOG), "-o", str(mean), "-m", "mean"]
+        assert CliRunner().invoke(cli, args).exit_code == 0
+        np.testing.assert_allclose(
+            pd.read_csv(out).fused_alt_m, pd.read_csv(mean).fused_alt_m + 0.5, atol=2e-6
+        )
+        refused = CliRunner().invoke(
+            cli, ["fuse", str(SAMPLE_LOG), "-o", str(tmp_path / "x.csv"), "--lean", "1"]
+        )
+        assert refused.exit_code == 2
+        assert "--lean does not apply to method 'support'" in refused.stderr
+    finally:
+        del METHODS["toy"]
+
+
+def test_a_registered_method_gets_the_contract_tests(tmp_path: Path) -> None:
+    (tmp_path / "toy_method.py").write_text(textwrap.dedent(TOY_METHOD))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), str(ROOT / "tests")]))
+    plugin = ["-p", "toy_method", "-p", "no:cacheprovider"]
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", *plugin, "-q", "-k", "toy", str(Path(__file__))],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    # shapes, near the sensors, beats the worst sensor, typed parameters: 4 for "toy"
+    assert "4 passed" in done.stdout, done.stdout

@@ -10,8 +10,9 @@ import pytest
 from click.testing import CliRunner
 
 from altfuse.cli import cli
-from altfuse.fuse.complementary import complementary_filter, fuse_multilayer
-from altfuse.fuse.delay import fuse_delay1
+from altfuse.fuse import FusionInput
+from altfuse.fuse.complementary import MultilayerParams, complementary_filter, fuse_multilayer
+from altfuse.fuse.delay import DelayParams, fuse_delay1
 from altfuse.inertial import G, on_clock, vertical_acceleration
 from altfuse.model import Attitude, Imu
 from conftest import SAMPLE_LOG, hover_flight, shared_log
@@ -99,8 +100,13 @@ def test_paper_b_hover_multilayer_beats_delay1() -> None:
     for seed in range(8):
         f = hover_flight(seed)
         for name, res in (
-            ("delay1", fuse_delay1(f.z)),
-            ("multilayer", fuse_multilayer(f.z, accel_up=f.accel_up, dt_s=f.dt_s)),
+            ("delay1", fuse_delay1(FusionInput.from_heights(f.z, f.dt_s), DelayParams())),
+            (
+                "multilayer",
+                fuse_multilayer(
+                    FusionInput.from_heights(f.z, f.dt_s, accel_up=f.accel_up), MultilayerParams()
+                ),
+            ),
         ):
             e = res.fused - f.truth
             rmse[name].append(np.sqrt(np.mean(e**2)))

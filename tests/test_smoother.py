@@ -14,8 +14,15 @@ import pytest
 from click.testing import CliRunner
 
 from altfuse.cli import cli
-from altfuse.errors import ParameterError
-from altfuse.fuse.smoother import DRIFT_GAIN, fuse_smoother, measurement_sigma, terrain_noise
+from altfuse.fuse import FusionInput
+from altfuse.fuse.smoother import (
+    DRIFT_GAIN,
+    SmootherParams,
+    fuse_smoother,
+    measurement_sigma,
+    terrain_noise,
+)
+from altfuse.params import InvalidParameter
 from altfuse.simulate import simulate_flight, write_simulated_log
 from conftest import ROOT
 
@@ -32,9 +39,8 @@ def test_measurement_noise_from_second_differences() -> None:
 def test_a_constant_altitude_is_recovered_with_a_shrinking_std() -> None:
     rng = np.random.default_rng(1)
     t = np.arange(0, 60, 0.1)
-    samples = [(t, 5 + rng.normal(0, s, t.size)) for s in (0.8, 0.2)]
-    z = np.column_stack([s[1] for s in samples])
-    res = fuse_smoother(z, samples=samples, kinds=("gps", "baro"), names=("gps", "baro"), t=t)
+    z = np.column_stack([5 + rng.normal(0, s, t.size) for s in (0.8, 0.2)])
+    res = fuse_smoother(FusionInput.from_heights(z, 0.1), SmootherParams())
     assert np.sqrt(np.mean((res.fused - 5) ** 2)) < 0.15
     assert res.params["model"] == "altitude-only random walk (no IMU)"
     np.testing.assert_array_less(0, res.tick_traces["fused_std"])
@@ -78,14 +84,11 @@ def test_sigma_override_and_nonsense_options(tmp_path: Path) -> None:
         )
         assert bad.exit_code == 2, bad.output
         assert fragment in bad.stderr
-    with pytest.raises(ParameterError, match="--accel-noise"):
+    with pytest.raises(InvalidParameter, match=r"^accel_noise_m2_s3 must be a positive number"):
+        SmootherParams(accel_noise_m2_s3=-1.0)
+    with pytest.raises(InvalidParameter, match=r"^sigma_m names no sensor of this log: lidar"):
         fuse_smoother(
-            np.ones((2, 1)),
-            samples=[(np.arange(2.0), np.ones(2))],
-            kinds=("gps",),
-            names=("gps",),
-            t=np.arange(2.0),
-            accel_noise=-1.0,
+            FusionInput.from_heights(np.ones((2, 1))), SmootherParams(sigma_m={"lidar": 1.0})
         )
 
 
@@ -104,7 +107,7 @@ def test_terrain_roughness_is_per_metre_flown() -> None:
 
 
 def _rmse_by_method(name: str) -> dict[str, float]:
-    from altfuse.evaluate import evaluate
+    from altfuse.evaluation import evaluate
 
     result = evaluate(ROOT / "sample_logs" / name)
     return {r.name: r.overall.rmse for r in result.rows if r.kind == "method"}

@@ -7,7 +7,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import pytest
 
-from altfuse.accuracy import Flight, best_other, flights, label, measure
+from accuracy import Flight, best_other, flights, label, measure
 
 FLIGHTS = flights([0])
 

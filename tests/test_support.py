@@ -10,8 +10,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from altfuse.errors import ParameterError
-from altfuse.fuse.support import auto_alpha, fuse_support, pairwise_support, window_mean_var
+from altfuse.fuse import FusionInput, FusionResult
+from altfuse.fuse.support import (
+    SupportParams,
+    auto_alpha,
+    fuse_support,
+    pairwise_support,
+    window_mean_var,
+)
+from altfuse.params import InvalidParameter
+
+
+def support(z: np.ndarray, **values: float) -> FusionResult:
+    """Paper A on heights already on a 10 Hz clock."""
+    return fuse_support(FusionInput.from_heights(z, dt_s=0.1), SupportParams(**values))
+
 
 # Two ticks of three sensors; alpha = 0.5 1/m², beta = 2, k = 1.
 Z = np.array([[10.0, 10.4, 11.0], [10.2, 10.2, 10.8]])
@@ -59,7 +72,7 @@ def test_window_mean_and_variance_eq6_eq7_hand_computed() -> None:
 
 
 def test_weights_and_fused_eq5_eq8_hand_computed() -> None:
-    res = fuse_support(Z, alpha=ALPHA, beta=BETA, window=K)
+    res = support(Z, alpha_per_m2=ALPHA, beta=BETA, window_s=K * 0.1)
     np.testing.assert_allclose(res.traces["lambda"][1], LAM1, rtol=1e-9)
     np.testing.assert_allclose(res.weights[1], np.array(LAM1) / sum(LAM1), rtol=1e-9)
     assert res.fused[1] == pytest.approx(X1, abs=1e-9)
@@ -71,7 +84,7 @@ def test_weights_and_fused_eq5_eq8_hand_computed() -> None:
 def test_lambda_clipped_at_zero_falls_back_to_equal_weights() -> None:
     # r alternates 0.6 / ~0 for every sensor: variance ~0.09, beta 100 drives every lambda < 0
     z = np.array([[0.0, 0.0, 0.0], [0.0, 30.0, 60.0]] * 3)
-    res = fuse_support(z, alpha=1.0, beta=100.0, window=3)
+    res = support(z, alpha_per_m2=1.0, beta=100.0, window_s=0.3)
     assert (res.traces["lambda"][-1] == 0).all()
     assert res.status[-1] == "equal"
     np.testing.assert_allclose(res.weights[-1], [1 / 3, 1 / 3, 1 / 3])
@@ -84,14 +97,14 @@ def test_missing_sensor_takes_no_part_and_n_counts_valid() -> None:
     # n = 2 valid sensors: r = exp(-0.5) / 2
     np.testing.assert_allclose(r[0, [0, 2]], math.exp(-0.5) / 2, rtol=1e-12)
     assert np.isnan(r[0, 1])
-    res = fuse_support(z, alpha=0.5)
+    res = support(z, alpha_per_m2=0.5)
     assert res.weights[0, 1] == 0.0
     assert res.fused[0] == pytest.approx(10.5)
 
 
 def test_one_valid_sensor_is_the_result_and_none_is_nan() -> None:
     z = np.array([[12.0, np.nan], [np.nan, np.nan], [12.0, 12.4]])
-    res = fuse_support(z, alpha=1.0)
+    res = support(z, alpha_per_m2=1.0)
     assert res.fused[0] == 12.0
     assert list(res.status) == ["single", "none", "fused"]
     assert np.isnan(res.fused[1])
@@ -110,30 +123,42 @@ def test_auto_alpha_from_the_robust_pairwise_spread() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"alpha": 0.0}, "--alpha"),
-        ({"alpha": math.nan}, "--alpha"),
-        ({"beta": -1.0}, "--beta"),
-        ({"window": -1}, "--window"),
+        ({"alpha_per_m2": 0.0}, "alpha_per_m2 must be a positive number, got 0.0"),
+        ({"alpha_per_m2": math.nan}, "alpha_per_m2 must be a positive number, got nan"),
+        ({"beta": -1.0}, "beta must be a number >= 0, got -1.0"),
+        ({"beta": "ten"}, "beta must be a number >= 0, got 'ten'"),
+        ({"window_s": -0.1}, "window_s must be a number >= 0, got -0.1"),
     ],
 )
-def test_nonsense_parameters_are_refused(kwargs: dict[str, float], message: str) -> None:
-    with pytest.raises(ParameterError, match=message):
-        fuse_support(Z, **kwargs)  # type: ignore[arg-type]
+def test_nonsense_parameters_are_refused_in_the_librarys_words(
+    kwargs: dict[str, float], message: str
+) -> None:
+    with pytest.raises(InvalidParameter) as caught:
+        SupportParams(**kwargs)
+    assert str(caught.value) == message
+    assert "--" not in str(caught.value)
+
+
+def test_the_window_is_in_seconds_whatever_the_rate() -> None:
+    z = np.random.default_rng(0).normal(10.0, 0.3, (50, 3))
+    at_10hz = fuse_support(FusionInput.from_heights(z, 0.1), SupportParams(window_s=0.5))
+    at_20hz = fuse_support(FusionInput.from_heights(z, 0.05), SupportParams(window_s=0.5))
+    assert (at_10hz.params["window_ticks"], at_20hz.params["window_ticks"]) == (5, 10)
 
 
 def test_paper_a_experiment_baro_departure(paper_a) -> None:  # type: ignore[no-untyped-def]
     """ALGORITHMS.md section 2: the barometer's weight falls while it departs, and support stays
     with GPS and sonar; the mean follows the barometer a third of the way."""
     f = paper_a
-    support = fuse_support(f.z)
+    fused = support(f.z)
     mean = f.z.mean(axis=1)
-    w = support.weights
+    w = fused.weights
     baro = f.names.index("baro")
     # measured (seed 7, defaults): baro weight 0.336 agreeing, 0.044 departing
     assert w[f.agree, baro].mean() == pytest.approx(1 / 3, abs=0.03)
     assert w[f.baro_departs, baro].mean() < 0.08
     dep = f.baro_departs
-    rmse_support = np.sqrt(np.mean((support.fused[dep] - f.truth[dep]) ** 2))
+    rmse_support = np.sqrt(np.mean((fused.fused[dep] - f.truth[dep]) ** 2))
     rmse_mean = np.sqrt(np.mean((mean[dep] - f.truth[dep]) ** 2))
     # measured: 0.084 m against 0.582 m
     assert rmse_support < 0.12
@@ -143,7 +168,7 @@ def test_paper_a_experiment_baro_departure(paper_a) -> None:  # type: ignore[no-
 
 def test_paper_a_experiment_scatter_sonar_heaviest(paper_a) -> None:  # type: ignore[no-untyped-def]
     f = paper_a
-    w = fuse_support(f.z).weights[f.scatter].mean(axis=0)
+    w = support(f.z).weights[f.scatter].mean(axis=0)
     # measured (seed 7): gps 0.28, baro 0.31, sonar 0.405
     assert np.argmax(w) == f.names.index("sonar")
     assert w[f.names.index("sonar")] > 0.38
@@ -156,7 +181,7 @@ finite = st.floats(-500.0, 5000.0, allow_nan=False)
 @given(column=hnp.arrays(np.float64, st.integers(1, 40), elements=finite), n=st.integers(2, 4))
 def test_identical_sensors_give_that_sensor(column: np.ndarray, n: int) -> None:
     z = np.repeat(column[:, None], n, axis=1)
-    res = fuse_support(z)
+    res = support(z)
     np.testing.assert_allclose(res.fused, column, rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(res.weights, 1.0 / n, rtol=1e-12)
 
@@ -167,7 +192,7 @@ def test_identical_sensors_give_that_sensor(column: np.ndarray, n: int) -> None:
     shift=st.floats(-1000.0, 1000.0),
 )
 def test_common_offset_shifts_the_result(z: np.ndarray, shift: float) -> None:
-    base = fuse_support(z, alpha=0.3)
-    moved = fuse_support(z + shift, alpha=0.3)
+    base = support(z, alpha_per_m2=0.3)
+    moved = support(z + shift, alpha_per_m2=0.3)
     np.testing.assert_allclose(moved.fused, base.fused + shift, rtol=1e-9, atol=1e-6)
     np.testing.assert_allclose(moved.weights, base.weights, atol=1e-6)

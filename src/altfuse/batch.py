@@ -23,37 +23,42 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, get_args
 
 import pandas as pd
 
 from altfuse.errors import AltfuseError, LogReadError, ParameterError
-from altfuse.evaluate import evaluate_prepared, truth_or_none
-from altfuse.io import read_log, sha256_of
-from altfuse.pipeline import FuseOptions, prepare, run_method
-from altfuse.plot import FORMATS, run_figure, writer
-from altfuse.write import atomic_outputs, write_json, write_outputs
+from altfuse.io import sha256_of
+from altfuse.job import Outputs, fuse_to_files
+from altfuse.params import InvalidParameter
+from altfuse.pipeline import FuseOptions
+from altfuse.write import atomic_outputs
 
 SUMMARY = "summary.csv"
 #: Exit code of a batch in which some logs failed (0: all ok; 1/2: the batch itself could not run).
 EXIT_PARTIAL = 4
 
 
+PlotFormat = Literal["png", "svg"]
+#: A log's outcome in the summary.
+Outcome = Literal["ok", "skipped", "failed"]
+
+
 @dataclass(frozen=True)
 class BatchOptions:
-    """What every log of a batch is run with."""
+    """What every log of a batch is run with; checked when built. With ``evaluate``, every
+    method is evaluated with its parameters in ``fuse.params`` (or its defaults)."""
 
     fuse: FuseOptions = field(default_factory=FuseOptions)
     weights: bool = False
-    plot: str | None = None  # "png" or "svg"
+    plot: PlotFormat | None = None
     evaluate: bool = False
     skip_existing: bool = False
     force: bool = False
 
-    def check(self) -> None:
-        self.fuse.check()
-        if self.plot is not None and f".{self.plot}" not in FORMATS:
-            raise ParameterError(f"--plot must be one of png, svg, got {self.plot!r}")
+    def __post_init__(self) -> None:
+        if self.plot is not None and self.plot not in get_args(PlotFormat):
+            raise InvalidParameter("plot", f"must be one of png, svg, got {self.plot!r}")
 
 
 @dataclass(frozen=True)
@@ -64,15 +69,14 @@ class Job:
     relative: Path
     stem: Path
 
-    def outputs(self, options: BatchOptions) -> dict[str, Path]:
-        out = {"csv": self._with(".csv"), "meta": self._with(".meta.json")}
-        if options.weights:
-            out["weights"] = self._with(".weights.csv")
-        if options.plot:
-            out["plot"] = self._with(f".{options.plot}")
-        if options.evaluate:
-            out["evaluation"] = self._with(".evaluation.json")
-        return out
+    def outputs(self, options: BatchOptions) -> Outputs:
+        return Outputs(
+            csv=self._with(".csv"),
+            meta=self._with(".meta.json"),
+            weights=self._with(".weights.csv") if options.weights else None,
+            plot=self._with(f".{options.plot}") if options.plot else None,
+            evaluation=self._with(".evaluation.json") if options.evaluate else None,
+        )
 
     def _with(self, suffix: str) -> Path:
         return self.stem.with_name(self.stem.name + suffix)
@@ -83,7 +87,7 @@ class LogResult:
     """One row of the summary."""
 
     log: str
-    status: str  # "ok", "skipped" (complete outputs found) or "failed"
+    status: Outcome  # "skipped": complete outputs found
     error: str = ""
     duration_s: float = 0.0
     sensors: str = ""
@@ -143,9 +147,9 @@ def plan(paths: Sequence[str | Path], out_dir: str | Path, pattern: str = "*.bin
 
 def is_complete(job: Job, options: BatchOptions) -> bool:
     """Whether ``job``'s outputs exist, complete, for the input as it is now and these options."""
-    wanted = job.outputs(options)
-    meta = wanted["meta"]
-    if not all(p.exists() for p in wanted.values()):
+    outputs = job.outputs(options)
+    meta = outputs.meta_path
+    if not all(p.exists() for p in outputs.paths()):
         return False
     try:
         record = json.loads(meta.read_text(encoding="utf-8"))
@@ -163,37 +167,25 @@ def process(job: Job, options: BatchOptions) -> LogResult:
     name = str(job.relative)
     if options.skip_existing and is_complete(job, options):
         return LogResult(name, "skipped", duration_s=time.perf_counter() - started)
-    existing = [p for p in job.outputs(options).values() if p.exists()]
+    outputs = job.outputs(options)
+    existing = [p for p in outputs.paths() if p.exists()]
     if existing and not options.force:
         message = (
             f"{existing[0]} exists; --force overwrites, --skip-existing keeps complete outputs"
         )
         return LogResult(name, "failed", message, time.perf_counter() - started)
     try:
-        prepared = prepare(read_log(job.log), options.fuse)
-        run = run_method(prepared, options.fuse)
-        wanted = job.outputs(options)
-        extra = {}
+        done = fuse_to_files(job.log, outputs, options.fuse, label=str(job.relative))
         metrics: dict[str, float | None] = {}
-        truth = None
         label = ""
-        if options.evaluate:
-            # the batch's run has the evaluation's options (no method parameters): reuse it
-            done = {options.fuse.method: run}
-            evaluation = evaluate_prepared(prepared, options=options.fuse, done=done)
-            truth = evaluation.truth
+        if done.evaluation is not None:
+            truth = done.evaluation.truth
             label = truth.source + (" (reference)" if truth.is_reference else "")
-            extra[wanted["evaluation"]] = (write_json(evaluation.as_dict()), False)
-            for row in evaluation.rows:
+            for row in done.evaluation.rows:
                 stats = row.overall.as_dict()
                 metrics[f"{row.name}_rmse"] = stats["rmse"]
                 metrics[f"{row.name}_max"] = stats["max_abs"]
-        if options.plot:
-            truth = truth or truth_or_none(run.log, run.referred)
-            fused = {run.result.method: run.result.fused}
-            fig = run_figure(run, fused, truth, f"{job.relative}: {run.result.method}")
-            extra[wanted["plot"]] = (writer(fig, wanted["plot"]), True)
-        write_outputs(run, wanted["csv"], wanted.get("weights"), wanted["meta"], extra)
+        run = done.run
         return LogResult(
             name,
             "ok",
@@ -254,7 +246,7 @@ def write_summary(results: Iterable[LogResult], path: Path) -> None:
         stage(path, lambda f: table.to_csv(f, index=False, float_format="%.6f"))
 
 
-def run_batch(
+def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's options)
     paths: Sequence[str | Path],
     out_dir: str | Path,
     options: BatchOptions | None = None,
@@ -269,10 +261,9 @@ def run_batch(
     ``on_result(result, total)`` is called as each log finishes (for progress).
     """
     options = options or BatchOptions()
-    options.check()
     workers = (os.cpu_count() or 1) if jobs is None else jobs
     if workers < 1:
-        raise ParameterError(f"--jobs must be at least 1, got {workers}")
+        raise InvalidParameter("jobs", f"must be at least 1, got {workers}")
     todo = plan(paths, out_dir, pattern)
     if not todo:
         raise LogReadError(f"no file matching {pattern!r} under {', '.join(map(str, paths))}")

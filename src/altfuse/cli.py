@@ -7,47 +7,38 @@ exit code: 1 for a log that cannot be processed, 2 for a usage or parameter erro
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
-import math
 import sys
 import time
 import traceback
-from collections.abc import Callable
+import typing
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, Literal, NoReturn
 
 import click
+from click.core import ParameterSource
 
 from altfuse import __version__
-from altfuse.batch import EXIT_PARTIAL, SUMMARY, BatchOptions, LogResult, run_batch
+from altfuse.batch import EXIT_PARTIAL, SUMMARY, BatchOptions, LogResult, PlotFormat, run_batch
 from altfuse.errors import AltfuseError, ParameterError
-from altfuse.evaluate import TRUTHS, evaluation_table, truth_or_none
-from altfuse.evaluate import evaluate as evaluate_log
-from altfuse.fuse import FUSERS
-from altfuse.fuse.complementary import (
-    DEFAULT_E_MAX_M,
-    DEFAULT_LAYER1_Q,
-    DEFAULT_REOPEN_S,
-    DEFAULT_T_S,
-)
-from altfuse.fuse.delay import DEFAULT_Q, FORMS
-from altfuse.fuse.smoother import DEFAULT_GATE, Q_ACCEL_NO_IMU
-from altfuse.fuse.support import DEFAULT_BETA, DEFAULT_WINDOW
+from altfuse.evaluation import TRUTHS, TruthChoice, evaluation_table
+from altfuse.evaluation import evaluate as evaluate_log
+from altfuse.fuse import METHODS, params_by_method
 from altfuse.info import damage, describe
 from altfuse.io import read_log
+from altfuse.job import Outputs, fuse_to_files
 from altfuse.metrics import ErrorStats
-from altfuse.pipeline import FuseOptions, fuse_log
+from altfuse.params import UNIT_SUFFIXES, InvalidParameter, fields, flag_of, hints, unit_of
+from altfuse.pipeline import FuseOptions
 from altfuse.plot import check_plot_path, run_figure, writer
+from altfuse.screen import screen
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
-from altfuse.write import atomic_outputs, default_meta_path, write_json, write_outputs
+from altfuse.write import atomic_outputs, write_json
 
 EXIT_BUG = 3
-#: Options that are parameters of a fusion method (passed on only when given).
-METHOD_OPTIONS = (
-    "alpha", "beta", "window", "form", "q", "time_constant", "e_max", "reopen", "gate",
-    "accel_noise", "sigmas", "offset_noises",
-)  # fmt: skip
 
 
 class _OneLineFormatter(logging.Formatter):
@@ -58,6 +49,19 @@ class _OneLineFormatter(logging.Formatter):
 def _fail(message: str, code: int) -> NoReturn:
     click.echo(f"altfuse: error: {message}", err=True)
     sys.exit(code)
+
+
+def _flag(name: str) -> str:
+    """The flag of the option a library parameter ``name`` comes from: a parameter field's, or
+    the name less its unit (``duration_s``: ``--duration``)."""
+    for cls in (FuseOptions, *(m.params for m in METHODS.values())):
+        for f in fields(cls):
+            if f.name == name:
+                return flag_of(f)
+    stem = next(
+        (name.removesuffix(s) for s in UNIT_SUFFIXES.values() if s and name.endswith(s)), name
+    )
+    return "--" + stem.replace("_", "-")
 
 
 class _Cli(click.Group):
@@ -73,6 +77,8 @@ class _Cli(click.Group):
             _fail("interrupted", 130)
         except click.ClickException as exc:
             _fail(exc.format_message().replace("\n", " "), exc.exit_code)
+        except InvalidParameter as exc:  # the library names the parameter; here, its flag
+            _fail(f"{_flag(exc.name)} {exc.problem}", exc.exit_code)
         except AltfuseError as exc:
             _fail(str(exc), exc.exit_code)
         except KeyboardInterrupt:
@@ -84,7 +90,9 @@ class _Cli(click.Group):
         sys.exit(code if isinstance(code, int) else 0)
 
 
-class _AlphaType(click.ParamType):  # type: ignore[type-arg]
+class _AutoFloat(click.ParamType):  # type: ignore[type-arg]
+    """A number, or ``auto`` (None: the library chooses it from the data)."""
+
     name = "auto|FLOAT"
 
     def convert(self, value: Any, param: Any, ctx: Any) -> float | None:
@@ -93,12 +101,119 @@ class _AlphaType(click.ParamType):  # type: ignore[type-arg]
         if str(value).lower() == "auto":
             return None
         try:
-            alpha = float(value)
+            return float(value)
         except ValueError:
             self.fail(f"{value!r} is neither 'auto' nor a number", param, ctx)
-        if not (math.isfinite(alpha) and alpha > 0):
-            self.fail(f"{value!r} is not a positive number", param, ctx)
-        return alpha
+
+
+class _NameValue(click.ParamType):  # type: ignore[type-arg]
+    """``NAME=NUMBER``, one value of a per-sensor parameter."""
+
+    def __init__(self, unit: str) -> None:
+        self.name = f"NAME={unit.upper() or 'NUMBER'}"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> tuple[str, float]:
+        if isinstance(value, tuple):
+            return value
+        name, _, number = str(value).partition("=")
+        try:
+            return name.strip(), float(number)
+        except ValueError:
+            self.fail(f"{value!r} is not {self.name}", param, ctx)
+
+
+def _click_type(hint: Any, unit: str) -> tuple[Any, bool]:
+    """The click type of a parameter field's type, and whether the option repeats."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is Literal:
+        return click.Choice([str(a) for a in args]), False
+    if origin in (Mapping, dict):
+        return _NameValue(unit), True
+    if type(None) in args:
+        return _AutoFloat(), False
+    return (click.INT if hint is int else click.FLOAT), False
+
+
+def _default_text(f: dataclasses.Field[Any]) -> str:
+    if f.metadata["default_text"]:
+        return str(f.metadata["default_text"])
+    return f"{f.default:g}" if isinstance(f.default, float) else str(f.default)
+
+
+def _option_spec(
+    f: dataclasses.Field[Any], hint: Any, help_text: str, defaults: bool
+) -> tuple[list[str], dict[str, Any]]:
+    """The declarations and attributes of a parameter field's option: with ``defaults``, it
+    defaults to the field's default and shows it; without, it defaults to "not given"."""
+    kind, repeats = _click_type(hint, unit_of(f))
+    attrs: dict[str, Any] = {"type": kind, "multiple": repeats, "help": help_text}
+    if defaults:
+        attrs.update(default=() if repeats else f.default, show_default=True)
+    return [flag_of(f), f.name], attrs
+
+
+def _method_parameter_options() -> list[click.Option]:
+    """One option per parameter field of the registered methods (methods sharing a field share
+    its option, the help naming each one's default); passed on only when given."""
+    users: dict[str, list[tuple[str, dataclasses.Field[Any], Any]]] = {}
+    for name, method in METHODS.items():
+        types = hints(method.params)
+        for f in fields(method.params):
+            users.setdefault(f.name, []).append((name, f, types[f.name]))
+    options = []
+    for field_name, used in users.items():
+        _, first, hint = used[0]
+        if any(h != hint or unit_of(f) != unit_of(first) for _, f, h in used):
+            raise TypeError(f"methods disagree on the type or unit of {field_name!r}")
+        by_default: dict[str, list[str]] = {}
+        for name, f, _ in used:
+            by_default.setdefault(_default_text(f), []).append(name)
+        unit = f" [{unit_of(first)}]" if unit_of(first) else ""
+        said = [f"{', '.join(names)} [default: {text}]" for text, names in by_default.items()]
+        said[0] = said[0].replace(" [", f": {first.metadata['help']}{unit} [", 1)
+        decls, attrs = _option_spec(first, hint, "; ".join(said) + ".", defaults=False)
+        if attrs["multiple"]:
+            attrs["help"] += " Repeatable."
+        options.append(click.Option(decls, **attrs))
+    return options
+
+
+class _MethodCommand(click.Command):
+    """A command whose method options come from ``METHODS`` as it is when the command runs:
+    a method registered after import gets its ``--method`` choice and its options."""
+
+    def __init__(self, *args: Any, choose: Literal["one", "many"], **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.choose = choose
+
+    def get_params(self, ctx: click.Context) -> list[click.Parameter]:
+        *own, help_option = super().get_params(ctx)
+        chooser: list[click.Parameter] = []
+        if self.choose == "one":
+            chooser.append(
+                click.Option(
+                    ["-m", "--method"],
+                    type=click.Choice(list(METHODS)),
+                    default="support",
+                    show_default=True,
+                    help="Fusion method.",
+                )
+            )
+        arguments = [p for p in own if isinstance(p, click.Argument)]
+        options = [p for p in own if not isinstance(p, click.Argument)]
+        return [*arguments, *chooser, *options, *_method_parameter_options(), help_option]
+
+
+def _method_values(options: dict[str, Any]) -> dict[str, Any]:
+    """Pop the method parameters from a command's ``options``: those given, by field name."""
+    ctx = click.get_current_context()
+    values = {}
+    for option in _method_parameter_options():
+        name = str(option.name)
+        value = options.pop(name, None)
+        if ctx.get_parameter_source(name) not in (ParameterSource.DEFAULT, None):
+            values[name] = dict(value) if option.multiple else value
+    return values
 
 
 @click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
@@ -128,21 +243,6 @@ def cli(verbose: int, quiet: bool, debug: bool) -> None:  # noqa: ARG001 (read i
 
 _LOG_ARG = click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
 _PATH = click.Path(dir_okay=False, path_type=Path)
-_METHOD = click.option(
-    "-m",
-    "--method",
-    type=click.Choice(list(FUSERS)),
-    default="support",
-    show_default=True,
-    help="Fusion method.",
-)
-
-
-def _method_option(
-    flag: str, kind: Any, help_text: str
-) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """A fusion-method parameter: passed on to the method only when given."""
-    return click.option(flag, type=kind, default=None, help=help_text)
 
 
 def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
@@ -150,58 +250,14 @@ def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..
 
 
 def _pipeline_options(command: Callable[..., Any]) -> Callable[..., Any]:
-    """The options every fusion run shares: clock, datum and the sensors required."""
-    for option in reversed(
-        [
-            click.option(
-                "--rate",
-                "rate_hz",
-                type=float,
-                default=10.0,
-                show_default=True,
-                help="Rate of the common clock [Hz].",
-            ),
-            click.option(
-                "--max-gap",
-                "max_gap_s",
-                type=float,
-                default=1.0,
-                show_default=True,
-                help="Longest gap in a sensor's data the spline may bridge [s].",
-            ),
-            click.option(
-                "--span",
-                type=click.Choice(["union", "overlap"]),
-                default="union",
-                show_default=True,
-                help="Clock over the union or the overlap of the sensors.",
-            ),
-            click.option(
-                "--ground-window",
-                "ground_s",
-                type=float,
-                default=5.0,
-                show_default=True,
-                help="Seconds on the ground used to find each sensor's datum.",
-            ),
-            click.option(
-                "--takeoff-climb",
-                "climb_m",
-                type=float,
-                default=1.0,
-                show_default=True,
-                help="Rise [m] that marks take-off.",
-            ),
-            click.option(
-                "--min-sensors",
-                type=int,
-                default=2,
-                show_default=True,
-                help="Fail unless at least this many altitude sources are usable.",
-            ),
-        ]
-    ):
-        command = option(command)
+    """The options every fusion run shares, from :class:`FuseOptions`' fields: clock, datum
+    and the sensors required."""
+    types = hints(FuseOptions)
+    for f in reversed(fields(FuseOptions)):
+        text = str(f.metadata["help"])
+        unit = f" [{unit_of(f)}]" if unit_of(f) else ""
+        decls, attrs = _option_spec(f, types[f.name], f"{text[0].upper()}{text[1:]}{unit}.", True)
+        command = click.option(*decls, **attrs)(command)
     return command
 
 
@@ -216,32 +272,6 @@ def _refuse_existing(force: bool, *paths: Path | None) -> None:
             raise ParameterError(f"{path} exists; --force overwrites it")
 
 
-def _parse_per_sensor(values: tuple[str, ...], hint: str, unit: str) -> dict[str, float] | None:
-    if not values:
-        return None
-    out = {}
-    for item in values:
-        name, _, number = item.partition("=")
-        try:
-            out[name.strip()] = float(number)
-        except ValueError:
-            raise click.BadParameter(f"{item!r} is not NAME={unit}", param_hint=hint) from None
-    return out
-
-
-def _per_sensor_option(
-    flag: str, dest: str, unit: str, text: str
-) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """A repeatable smoother option NAME=VALUE, one value per sensor."""
-    return click.option(
-        flag,
-        dest,
-        multiple=True,
-        callback=lambda _ctx, _param, value: _parse_per_sensor(value, flag, unit),
-        help=f"smoother: {text} NAME={unit}, repeatable.",
-    )
-
-
 def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
     return click.option(
         "--plot",
@@ -251,64 +281,10 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
     )(command)
 
 
-@cli.command()
+@cli.command(cls=_MethodCommand, choose="one")
 @_LOG_ARG
 @_output_option("The fused CSV to write; the provenance goes beside it as NAME.meta.json.")
-@_METHOD
 @_pipeline_options
-@_method_option(
-    "--alpha", _AlphaType(), "support: kernel scale [1/m^2], or 'auto' (from the data; default)."
-)
-@_method_option(
-    "--beta", float, f"support: penalty on the support's variance [default {DEFAULT_BETA:g}]."
-)
-@_method_option(
-    "--window", int, f"support: k, previous ticks in the window [default {DEFAULT_WINDOW}]."
-)
-@_method_option(
-    "--form",
-    click.Choice(FORMS),
-    "delay1/delay2/multilayer: temporal recursion, 'practical' (random walk, "
-    "default) or 'paper' (constant altitude).",
-)
-@_method_option(
-    "--q",
-    float,
-    "delay1/delay2/multilayer: process noise [m^2 per tick] "
-    f"[default {DEFAULT_Q:g}; multilayer {DEFAULT_LAYER1_Q:g}].",
-)
-@_method_option(
-    "--time-constant",
-    float,
-    f"multilayer: complementary filter time constant T [s] [default {DEFAULT_T_S:g}].",
-)
-@_method_option(
-    "--e-max",
-    float,
-    f"multilayer: gate threshold on the correction [m] [default {DEFAULT_E_MAX_M:g}].",
-)
-@_method_option(
-    "--reopen",
-    float,
-    f"multilayer: seconds before a shut gate reopens [default {DEFAULT_REOPEN_S:g}].",
-)
-@_method_option("--gate", float, f"smoother: innovation gate [sigmas] [default {DEFAULT_GATE:g}].")
-@_method_option(
-    "--accel-noise",
-    float,
-    "smoother: white acceleration noise density [m^2/s^3] "
-    f"[default: from the accelerometer's noise, {Q_ACCEL_NO_IMU:g} without IMU].",
-)
-@_per_sensor_option(
-    "--sigma", "sigmas", "METRES", "a sensor's measurement noise [default: from the log]."
-)
-@_per_sensor_option(
-    "--offset-noise",
-    "offset_noises",
-    "M2_PER_S",
-    "random-walk density of a sensor's offset (a rangefinder's ground height) [default: gps "
-    "0.01, baro 1e-4; rangefinder from the terrain and the speed].",
-)
 @click.option(
     "--weights",
     "weights_path",
@@ -326,7 +302,6 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
 def fuse(
     log: Path,
     output: Path,
-    method: str,
     weights_path: Path | None,
     meta_path: Path | None,
     plot_path: Path | None,
@@ -334,6 +309,8 @@ def fuse(
     **options: Any,
 ) -> None:
     """Fuse the altitude sensors of LOG into one altitude, written to a CSV.
+
+    Each method's options apply to the methods their help names.
 
     \b
     Example:
@@ -343,37 +320,24 @@ def fuse(
       altfuse fuse flight.bin -o flight.csv --method multilayer --plot flight.png
       altfuse fuse flight.bin -o flight.csv --method smoother --sigma gps=0.8
     """
-    params = {k: options.pop(k) for k in METHOD_OPTIONS}
-    params = {k: v for k, v in params.items() if v is not None}
+    method = options.pop("method")
+    params = params_by_method(_method_values(options), [method])
     opts = FuseOptions(method=method, params=params, **options)
-    opts.check()
-    if plot_path is not None:
-        check_plot_path(plot_path)
-    targets = [output, weights_path, meta_path or default_meta_path(output), plot_path]
-    for target in targets:
-        if target is not None and log.exists() and target.resolve() == log.resolve():
-            raise ParameterError(f"{target} is the input log; choose another output path")
-    _refuse_existing(force, *targets)
-    run = fuse_log(log, opts)
+    outputs = Outputs(output, meta_path, weights_path, plot_path)
+    outputs.refuse(log, force)
+    done = fuse_to_files(log, outputs, opts)
+    run = done.run
     for note in run.log.notes:
         logging.getLogger("altfuse").info("%s", note)
     warning = damage(run.log)
     if warning:
         logging.getLogger("altfuse").warning("%s", warning)
-    extra = {}
-    if plot_path is not None:
-        truth = truth_or_none(run.log, run.referred)
-        fig = run_figure(run, {method: run.result.fused}, truth, f"{log.name}: {method}")
-        extra[plot_path] = (writer(fig, plot_path), True)
-    started = time.perf_counter()
-    outputs = write_outputs(run, output, weights_path, meta_path, extra)
-    logging.getLogger("altfuse").info("wrote the outputs in %.2f s", time.perf_counter() - started)
     counts = run.provenance["status_counts"]
     click.echo(
         f"{output}: {run.referred.t.size} rows, method {method}, "
         f"sensors {', '.join(run.referred.names)}; "
         + ", ".join(f"{k} {v}" for k, v in counts.items())
-        + f" (provenance: {outputs['meta']})"
+        + f" (provenance: {done.written['meta']})"
     )
 
 
@@ -383,7 +347,7 @@ def _stats_line(name: str, kind: str, s: ErrorStats) -> str:
     )
 
 
-@cli.command()
+@cli.command(cls=_MethodCommand, choose="many")
 @_LOG_ARG
 @click.option(
     "--truth",
@@ -392,9 +356,7 @@ def _stats_line(name: str, kind: str, s: ErrorStats) -> str:
     show_default=True,
     help="Measure against the simulator's SIM truth, or the EKF as a reference.",
 )
-@click.option(
-    "--methods", default=",".join(FUSERS), show_default=True, help="Comma-separated methods to run."
-)
+@click.option("--methods", help="Comma-separated methods to run [default: every method].")
 @click.option(
     "--segments",
     help="Also per segment: a length in seconds (30) or boundaries on the log's clock (50.5,62.3).",
@@ -404,10 +366,10 @@ def _stats_line(name: str, kind: str, s: ErrorStats) -> str:
 @_pipeline_options
 @_plot_option
 @_force_option
-def evaluate(
+def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
     log: Path,
-    truth: str,
-    methods: str,
+    truth: TruthChoice,
+    methods: str | None,
     segments: str | None,
     json_path: Path | None,
     csv_path: Path | None,
@@ -425,13 +387,15 @@ def evaluate(
     Example:
       altfuse evaluate sim.bin
       altfuse evaluate flight.bin --methods support,mean --segments 30 -o report.json
+      altfuse evaluate flight.bin --methods support --alpha 0.5
       altfuse evaluate flight.bin --plot flight.png --csv report.csv
     """
     if plot_path is not None:
         check_plot_path(plot_path)
     _refuse_existing(force, json_path, csv_path, plot_path)
-    chosen = [m.strip() for m in methods.split(",") if m.strip()]
-    result = evaluate_log(log, chosen, FuseOptions(**options), truth, segments)
+    chosen = [m.strip() for m in (methods or ",".join(METHODS)).split(",") if m.strip()]
+    params = params_by_method(_method_values(options), chosen)
+    result = evaluate_log(log, chosen, FuseOptions(params=params, **options), truth, segments)
     t = result.prepared.referred.t
     click.echo(
         f"{log.name}: measured against {result.truth.label}, {t.size} ticks "
@@ -484,7 +448,7 @@ class _Progress:
         )
 
 
-@cli.command()
+@cli.command(cls=_MethodCommand, choose="one")
 @click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option(
     "-o",
@@ -512,7 +476,6 @@ class _Progress:
     is_flag=True,
     help="Skip logs whose outputs are complete for this input and these options.",
 )
-@_METHOD
 @_pipeline_options
 @click.option("--weights", is_flag=True, help="Also write each log's weight traces.")
 @click.option(
@@ -528,16 +491,15 @@ class _Progress:
     help="Also evaluate every method on each log (metrics in the summary).",
 )
 @_force_option
-def batch(
+def batch(  # noqa: PLR0913 (one argument per option: click's way)
     paths: tuple[Path, ...],
     output: Path,
     pattern: str,
     jobs: int | None,
     scheduler: str | None,
     skip_existing: bool,
-    method: str,
     weights: bool,
-    plot_format: str | None,
+    plot_format: PlotFormat | None,
     with_evaluation: bool,
     force: bool,
     **options: Any,
@@ -546,18 +508,23 @@ def batch(
 
     Each log's outputs go under OUTPUT, mirroring the input tree; OUTPUT/summary.csv has one row
     per log: status (ok, skipped, failed), the error, duration, sensors, samples, and with
-    --evaluate each method's RMSE and maximum error. Exit code 0 when every log succeeded, 4 when
-    some failed.
+    --evaluate each method's RMSE and maximum error. The method options are fuse's; with
+    --evaluate they apply to every method evaluated that takes them. Exit code 0 when every log
+    succeeded, 4 when some failed.
 
     \b
     Example:
       altfuse batch logs/ -o results/
       altfuse batch logs/ more/flight.bin -o results/ --jobs 2 --evaluate --plot png
       altfuse batch logs/ -o results/ --skip-existing
+      altfuse batch logs/ -o results/ -m support --alpha 0.5
       altfuse batch logs/ -o results/ --scheduler tcp://10.0.0.5:8786
     """
+    method = options.pop("method")
+    evaluated = list(METHODS) if with_evaluation else [method]
+    params = params_by_method(_method_values(options), evaluated)
     settings = BatchOptions(
-        fuse=FuseOptions(method=method, **options),
+        fuse=FuseOptions(method=method, params=params, **options),
         weights=weights,
         plot=plot_format,
         evaluate=with_evaluation,
@@ -588,7 +555,7 @@ def info(log: Path, as_json: bool) -> None:
       altfuse info flight.bin
       altfuse info flight.bin --json
     """
-    summary = describe(read_log(log))
+    summary = describe(screen(read_log(log)))
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return

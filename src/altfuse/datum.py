@@ -26,16 +26,16 @@ tilt-corrected by the autopilot and is left alone).
 
 from __future__ import annotations
 
-import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from altfuse.align import Aligned
-from altfuse.errors import NoUsableSensorsError, ParameterError
-from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Series
+from altfuse.align import Aligned, merge_duplicates
+from altfuse.errors import NoUsableSensorsError
+from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Samples, SensorKind, Series
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
 MIN_WINDOW_TICKS = 3
@@ -63,7 +63,7 @@ class Referred:
 
     t: FloatArray
     names: tuple[str, ...]
-    kinds: tuple[str, ...]
+    kinds: tuple[SensorKind, ...]
     h: FloatArray
     reference: str
     takeoff_s: float | None
@@ -109,15 +109,6 @@ def tilt_correct(series: Series, attitude: Attitude | None) -> Series:
     )
 
 
-def check_datum_parameters(ground_s: float, climb_m: float) -> None:
-    if not (math.isfinite(ground_s) and ground_s > 0):
-        raise ParameterError(
-            f"--ground-window must be a positive number of seconds, got {ground_s}"
-        )
-    if not (math.isfinite(climb_m) and climb_m > 0):
-        raise ParameterError(f"--takeoff-climb must be a positive number of metres, got {climb_m}")
-
-
 def choose_reference(aligned: Aligned) -> int:
     """Index of the datum reference: the first kind in SENSOR_KINDS order with most valid ticks."""
     valid = np.isfinite(aligned.z).sum(axis=0)
@@ -154,19 +145,21 @@ def detect_takeoff(
     return float(t[above[0]]) if above.size else None
 
 
-def refer_to_takeoff(aligned: Aligned, ground_s: float = 5.0, climb_m: float = 1.0) -> Referred:
+def refer_to_takeoff(
+    aligned: Aligned, ground_window_s: float = 5.0, takeoff_climb_m: float = 1.0
+) -> Referred:
     """Subtract from each source its offset to height above take-off (see module doc).
 
     Parameters
     ----------
     aligned
         Sources on one clock.
-    ground_s
-        Length of the ground window [s].
-    climb_m
-        Rise of the reference source that marks take-off [m].
+    ground_window_s
+        Length of the ground window [s], > 0 (checked by :class:`altfuse.FuseOptions`).
+    takeoff_climb_m
+        Rise of the reference source that marks take-off [m], > 0.
     """
-    check_datum_parameters(ground_s, climb_m)
+    ground_s, climb_m = ground_window_s, takeoff_climb_m
     t, z = aligned.t, aligned.z
     ref = choose_reference(aligned)
     ref_valid = np.isfinite(z[:, ref])
@@ -223,3 +216,14 @@ def refer_to_takeoff(aligned: Aligned, ground_s: float = 5.0, climb_m: float = 1
         offsets=tuple(offsets[i] for i in keep),
         dropped=dropped,
     )
+
+
+def referred_samples(sensors: Sequence[Series], referred: Referred) -> tuple[Samples, ...]:
+    """Each referred sensor's own samples (time, height above take-off), duplicates merged, in
+    the clock's column order."""
+    by_name = {s.name: s for s in sensors}
+    out = []
+    for o in referred.offsets:
+        s = by_name[o.name]
+        out.append(Samples(*merge_duplicates(s.t, s.value - o.offset_m)))
+    return tuple(out)

@@ -9,16 +9,61 @@ with ``R`` from ZYX Euler angles; only its last row matters,
 ``(-sin(pitch), sin(roll) cos(pitch), cos(roll) cos(pitch))``. Level and at rest
 ``f = (0, 0, -g)`` and ``a_up = 0``. The IMU is logged faster than the fusion clock; its samples are
 averaged into each tick's cell (a box filter that also blunts single-sample spikes).
+
+Paper B subtracts the at-rest reading; here it is the median of ``a_up`` over the datum's ground
+window (the vehicle still, on the ground or in a steady hover). The median, because that window
+can end in the first second of a gentle take-off.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 
 from altfuse.align import cell_means
-from altfuse.model import Attitude, FloatArray, Imu
+from altfuse.model import Attitude, FloatArray, Imu, Samples
 
 G = 9.80665  # standard gravity [m/s²]
+
+
+@dataclass(frozen=True)
+class VerticalAcceleration:
+    """Earth-frame vertical acceleration [m/s², up, gravity removed], less its at-rest reading.
+
+    Attributes
+    ----------
+    samples
+        At the IMU's sample times within the attitude's time range.
+    on_clock
+        Averaged into the cells of the fusion clock's ticks; NaN for a tick with no IMU sample.
+    record
+        Where it came from and the at-rest reading removed, for the provenance.
+    """
+
+    samples: Samples
+    on_clock: FloatArray
+    record: dict[str, Any]
+
+
+def referred_vertical_acceleration(
+    imu: Imu, attitude: Attitude, clock: FloatArray, rate_hz: float, still_s: tuple[float, float]
+) -> VerticalAcceleration:
+    """:func:`vertical_acceleration` less its at-rest reading: the median over the ticks of
+    ``clock`` in ``still_s`` (the datum's ground window), 0 where none has a sample."""
+    t, a = vertical_acceleration(imu, attitude)
+    a_clock = on_clock(t, a, clock, rate_hz)
+    lo, hi = still_s
+    still = (clock >= lo) & (clock <= hi) & np.isfinite(a_clock)
+    bias = float(np.median(a_clock[still])) if still.any() else 0.0
+    record = {
+        "source": f"{imu.source} rotated by {attitude.source}",
+        "at_rest_bias_m_s2": bias,
+        "bias_window_s": [lo, hi],
+        "ticks_without_imu": int((~np.isfinite(a_clock)).sum()),
+    }
+    return VerticalAcceleration(Samples(t, a - bias), a_clock - bias, record)
 
 
 def vertical_acceleration(imu: Imu, attitude: Attitude) -> tuple[FloatArray, FloatArray]:

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal, NamedTuple, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -11,7 +12,25 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 
 #: The kinds of altitude source, in the order altfuse prefers them as a datum reference.
-SENSOR_KINDS = ("baro", "gps", "rangefinder")
+SensorKind = Literal["baro", "gps", "rangefinder"]
+SENSOR_KINDS: tuple[SensorKind, ...] = get_args(SensorKind)
+#: What a series is: an altitude source, or a reference, speed or temperature beside them.
+SeriesKind = Literal[SensorKind, "reference", "speed", "temperature"]
+
+
+def sensor_kind(kind: SeriesKind) -> SensorKind:
+    """``kind`` as an altitude source's kind; ValueError for a reference, speed or temperature."""
+    for k in SENSOR_KINDS:
+        if kind == k:
+            return k
+    raise ValueError(f"{kind!r} is not an altitude source's kind")
+
+
+class Samples(NamedTuple):
+    """A signal at its own sample times: time [s], value (SI units)."""
+
+    t: FloatArray
+    value: FloatArray
 
 
 @dataclass(frozen=True)
@@ -23,7 +42,8 @@ class Series:
     name
         Column name in the output, e.g. ``gps``, ``gps2``, ``baro``, ``rangefinder``.
     kind
-        ``gps``, ``baro`` or ``rangefinder`` for sensors; ``reference`` for references.
+        ``gps``, ``baro`` or ``rangefinder`` for sensors; ``reference`` for references,
+        ``speed`` and ``temperature`` for the series beside them.
     source
         Where it came from in the log, e.g. ``GPS.Alt[I=0]`` or ``CTUN.SAlt``.
     datum
@@ -38,7 +58,7 @@ class Series:
     """
 
     name: str
-    kind: str
+    kind: SeriesKind
     source: str
     datum: str
     t: FloatArray

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import inspect
 import logging
 import time
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -12,46 +12,65 @@ from typing import Any
 import numpy as np
 
 from altfuse import __version__
-from altfuse.align import Aligned, align, check_align_parameters, merge_duplicates
-from altfuse.datum import Referred, check_datum_parameters, refer_to_takeoff, tilt_correct
+from altfuse.align import Aligned, Span, align
+from altfuse.datum import Referred, refer_to_takeoff, referred_samples, tilt_correct
 from altfuse.errors import NoUsableSensorsError, ParameterError, UnsupportedLogError
-from altfuse.fuse import FUSERS, LOG_INPUTS, FusionResult
-from altfuse.inertial import on_clock, vertical_acceleration
+from altfuse.fuse import METHODS, FusionInput, FusionResult, Method, method
+from altfuse.inertial import referred_vertical_acceleration
 from altfuse.io import read_log
-from altfuse.model import FlightLog, FloatArray, Series
+from altfuse.model import FlightLog, Samples, Series
+from altfuse.params import Params, param, validate
+from altfuse.screen import screen
 
 log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class FuseOptions:
-    """Everything that decides a fusion run besides the log itself."""
+    """Everything that decides a fusion run besides the log itself; checked when built.
+
+    ``params`` holds the parameters of any method by its name (as ``altfuse evaluate`` runs
+    several); a method not in it runs with its defaults.
+    """
 
     method: str = "support"
-    rate_hz: float = 10.0
-    max_gap_s: float = 1.0
-    span: str = "union"
-    ground_s: float = 5.0
-    climb_m: float = 1.0
-    min_sensors: int = 2
-    params: dict[str, Any] = field(default_factory=dict)
+    params: Mapping[str, Params] = field(default_factory=dict)
+    rate_hz: float = param(
+        10.0, help="rate of the common clock", unit="Hz", check="positive", maximum=1000.0
+    )
+    max_gap_s: float = param(
+        1.0,
+        help="longest gap in a sensor's data the spline may bridge",
+        unit="s",
+        check="positive",
+    )
+    span: Span = param(
+        "union", help="the clock over the union or the overlap of the sensors' time ranges"
+    )
+    ground_window_s: float = param(
+        5.0, help="time on the ground used to find each sensor's datum", unit="s", check="positive"
+    )
+    takeoff_climb_m: float = param(1.0, help="rise that marks take-off", unit="m", check="positive")
+    min_sensors: int = param(
+        2, help="fail unless at least this many altitude sources are usable", check="at least 1"
+    )
 
-    def check(self) -> None:
-        """Raise :class:`ParameterError` before any work if an option means nothing."""
-        if self.method not in FUSERS:
-            raise ParameterError(
-                f"unknown method {self.method!r}; choose one of {', '.join(FUSERS)}"
-            )
-        accepted = inspect.signature(FUSERS[self.method]).parameters
-        for name in self.params:
-            if name not in accepted or name == "z" or name in LOG_INPUTS:
+    def __post_init__(self) -> None:
+        validate(self)
+        method(self.method)
+        for name, given in self.params.items():
+            wanted = method(name).params
+            if type(given) is not wanted:
                 raise ParameterError(
-                    f"--{name.replace('_', '-')} does not apply to method {self.method!r}"
+                    f"method {name!r} takes {wanted.__name__}, not {type(given).__name__}"
                 )
-        check_align_parameters(self.rate_hz, self.max_gap_s, self.span)
-        check_datum_parameters(self.ground_s, self.climb_m)
-        if self.min_sensors < 1:
-            raise ParameterError(f"--min-sensors must be at least 1, got {self.min_sensors}")
+        object.__setattr__(self, "params", dict(self.params))
+
+    def params_of(self, name: str | None = None) -> Params:
+        """The parameters method ``name`` (default: ``method``) runs with."""
+        name = name or self.method
+        given = self.params.get(name)
+        return method(name).params() if given is None else given
 
 
 @dataclass(frozen=True)
@@ -77,8 +96,8 @@ def _require_sensors(
             f"{log_name}: no usable altitude source (looked for GPS, BARO, RFND, SONR, CTUN){why}"
         )
     raise NoUsableSensorsError(
-        f"{log_name}: {len(names)} usable altitude source ({', '.join(names)}) where --min-sensors "
-        f"is {options.min_sensors}{why}; --min-sensors 1 writes a single source"
+        f"{log_name}: {len(names)} usable altitude source ({', '.join(names)}) where min_sensors "
+        f"is {options.min_sensors}{why}; min_sensors 1 (--min-sensors 1) writes a single source"
     )
 
 
@@ -94,14 +113,14 @@ class Prepared:
 
 
 def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
-    """Tilt-correct, align and refer the altitude sources of ``flight`` to take-off."""
-    options.check()
+    """Screen, tilt-correct, align and refer the altitude sources of ``flight`` to take-off."""
     name = Path(flight.path).name
     if flight.vehicle == "sub":
         raise UnsupportedLogError(
             f"{name}: an ArduSub log; its BARO is water depth, "
             "and altfuse fuses the altitude of aircraft"
         )
+    flight = screen(flight)
     dropped = dict(flight.dropped_sources)
     _require_sensors(name, tuple(s.name for s in flight.sensors), options, dropped)
     started = time.perf_counter()
@@ -109,7 +128,7 @@ def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     sensors = [s for s in sensors if s.t.size]
     aligned = align(sensors, options.rate_hz, options.max_gap_s, options.span)
     aligned_at = time.perf_counter()
-    referred = refer_to_takeoff(aligned, options.ground_s, options.climb_m)
+    referred = refer_to_takeoff(aligned, options.ground_window_s, options.takeoff_climb_m)
     log.info(
         "%s: aligned %d ticks in %.2f s, datum in %.2f s",
         name,
@@ -122,37 +141,55 @@ def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     return Prepared(flight, sensors, aligned, referred, dropped)
 
 
+def _samples(series: Series | None) -> Samples | None:
+    return None if series is None else Samples(series.t, series.value)
+
+
+def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> FusionInput:
+    """What the pipeline hands method ``chosen`` (named ``name`` in errors): the referred
+    sensors on the clock and their own samples, and from the log what it ``uses``.
+
+    Raises
+    ------
+    NoUsableSensorsError
+        The method requires the vertical acceleration and the log has no IMU or ATT records.
+    """
+    flight, referred = prepared.log, prepared.referred
+    accel = None
+    if "accel" in chosen.uses and flight.imu is not None and flight.attitude is not None:
+        accel = referred_vertical_acceleration(
+            flight.imu, flight.attitude, referred.t, prepared.aligned.rate_hz,
+            referred.ground_window_s,
+        )  # fmt: skip
+    if "accel" in chosen.requires and accel is None:
+        missing = [n for n, v in (("IMU", flight.imu), ("ATT", flight.attitude)) if v is None]
+        others = ", ".join(m for m, f in METHODS.items() if "accel" not in f.requires)
+        raise NoUsableSensorsError(
+            f"{Path(flight.path).name}: method {name!r} needs the accelerometer, and "
+            f"the log has no {' or '.join(missing)} records; {others} work without it"
+        )
+    temps = flight.temperatures
+    return FusionInput(
+        t=referred.t,
+        z=referred.h,
+        names=referred.names,
+        kinds=referred.kinds,
+        samples=referred_samples(prepared.sensors, referred),
+        dt_s=1.0 / prepared.aligned.rate_hz,
+        on_ground_s=referred.on_ground_s,
+        speed=_samples(flight.ground_speed),
+        temperatures=tuple(_samples(temps.get(n)) for n in referred.names),
+        accel=accel,
+    )
+
+
 def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
     """Fuse prepared sources with ``options.method`` and its parameters."""
-    options.check()
-    flight, referred = prepared.log, prepared.referred
-    fuser = FUSERS[options.method]
-    inputs: dict[str, Any] = {}
-    wanted = _params(fuser)
-    accel_record: dict[str, Any] | None = None
-    if "accel_up" in wanted:
-        inputs["accel_up"], accel_record = accel_on_clock(flight, referred, options)
-    if "accel" in wanted:
-        inputs["accel"], accel_record = accel_samples(flight, referred, options)
-    if "dt_s" in wanted:
-        inputs["dt_s"] = 1.0 / options.rate_hz
-    if "samples" in wanted:
-        inputs["samples"] = referred_samples(prepared)
-    if "on_ground" in wanted:
-        inputs["on_ground"] = referred.on_ground_s
-    if "speed" in wanted:
-        speed = flight.ground_speed
-        inputs["speed"] = None if speed is None else (speed.t, speed.value)
-    if "temperatures" in wanted:
-        temps = flight.temperatures
-        inputs["temperatures"] = [
-            (temps[n].t, temps[n].value) if n in temps else None for n in referred.names
-        ]
-    for name, value in (("t", referred.t), ("kinds", referred.kinds), ("names", referred.names)):
-        if name in wanted:
-            inputs[name] = value
+    flight = prepared.log
+    chosen = method(options.method)
+    inputs = fusion_input(prepared, chosen, options.method)
     started = time.perf_counter()
-    result = fuser(referred.h, **inputs, **options.params)
+    result = chosen(inputs, options.params_of())
     log.info(
         "%s: fused with %s in %.2f s",
         Path(flight.path).name,
@@ -161,80 +198,20 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
     )
     record = provenance(prepared, result)
     record["options"] = asdict(options)
-    if accel_record is not None:
-        record["vertical_acceleration"] = accel_record
+    if "accel" in chosen.uses:
+        record["vertical_acceleration"] = (
+            {"source": None, "note": "no IMU or ATT records: altitude-only model"}
+            if inputs.accel is None
+            else inputs.accel.record
+        )
     return FuseRun(
         log=flight,
         aligned=prepared.aligned,
-        referred=referred,
+        referred=prepared.referred,
         result=result,
         options=options,
         provenance=record,
     )
-
-
-def accel_on_clock(
-    flight: FlightLog, referred: Referred, options: FuseOptions
-) -> tuple[FloatArray, dict[str, Any]]:
-    """Earth-frame vertical acceleration on the clock, less its at-rest reading."""
-    _, _, a_clock, record = _vertical(flight, referred, options)
-    return a_clock - record["at_rest_bias_m_s2"], record
-
-
-def _vertical(
-    flight: FlightLog, referred: Referred, options: FuseOptions
-) -> tuple[FloatArray, FloatArray, FloatArray, dict[str, Any]]:
-    """The vertical acceleration samples, their averages on the clock, and the at-rest reading.
-
-    Paper B subtracts the at-rest reading; here it is the median of ``a_up`` over the datum's
-    ground window (the vehicle still, on the ground or in a steady hover). The median, because
-    that window can end in the first second of a gentle take-off.
-    """
-    missing = [n for n, v in (("IMU", flight.imu), ("ATT", flight.attitude)) if v is None]
-    if flight.imu is None or flight.attitude is None:
-        others = ", ".join(m for m, f in FUSERS.items() if "accel_up" not in _params(f))
-        raise NoUsableSensorsError(
-            f"{Path(flight.path).name}: method {options.method!r} needs the accelerometer, and "
-            f"the log has no {' or '.join(missing)} records; {others} work without it"
-        )
-    t, a = vertical_acceleration(flight.imu, flight.attitude)
-    a_clock = on_clock(t, a, referred.t, options.rate_hz)
-    lo, hi = referred.ground_window_s
-    still = (referred.t >= lo) & (referred.t <= hi) & np.isfinite(a_clock)
-    bias = float(np.median(a_clock[still])) if still.any() else 0.0
-    record = {
-        "source": f"{flight.imu.source} rotated by {flight.attitude.source}",
-        "at_rest_bias_m_s2": bias,
-        "bias_window_s": [lo, hi],
-        "ticks_without_imu": int((~np.isfinite(a_clock)).sum()),
-    }
-    return t, a, a_clock, record
-
-
-def accel_samples(
-    flight: FlightLog, referred: Referred, options: FuseOptions
-) -> tuple[tuple[FloatArray, FloatArray] | None, dict[str, Any]]:
-    """The vertical acceleration samples less the at-rest reading of :func:`accel_on_clock`, or
-    None (and the record says so) when the log has no IMU or ATT."""
-    if flight.imu is None or flight.attitude is None:
-        return None, {"source": None, "note": "no IMU or ATT records: altitude-only model"}
-    t, a, _, record = _vertical(flight, referred, options)
-    return (t, a - record["at_rest_bias_m_s2"]), record
-
-
-def referred_samples(prepared: Prepared) -> list[tuple[FloatArray, FloatArray]]:
-    """Each fused sensor's own samples (time, height above take-off), in the clock's order."""
-    by_name = {s.name: s for s in prepared.sensors}
-    out = []
-    for o in prepared.referred.offsets:
-        s = by_name[o.name]
-        t, v = merge_duplicates(s.t, s.value - o.offset_m)
-        out.append((t, v))
-    return out
-
-
-def _params(fuser: Any) -> set[str]:
-    return set(inspect.signature(fuser).parameters)
 
 
 def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
@@ -245,7 +222,6 @@ def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
 def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
     """Read the log at ``path`` and fuse its altitude sources (the ``altfuse fuse`` job)."""
     options = options or FuseOptions()
-    options.check()
     started = time.perf_counter()
     flight = read_log(path)
     log.info(

@@ -15,13 +15,13 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
-from altfuse.errors import ParameterError
 from altfuse.model import FloatArray
+from altfuse.params import InvalidParameter
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from altfuse.evaluate import Truth
+    from altfuse.evaluation import Truth
     from altfuse.pipeline import FuseRun
 
 FORMATS = (".png", ".svg")
@@ -31,7 +31,7 @@ _SENSOR_COLOURS = {"gps": "tab:blue", "baro": "tab:orange", "rangefinder": "tab:
 def check_plot_path(path: str | Path) -> Path:
     path = Path(path)
     if path.suffix.lower() not in FORMATS:
-        raise ParameterError(f"--plot must end in {' or '.join(FORMATS)}, got {path.name}")
+        raise InvalidParameter("plot", f"must end in {' or '.join(FORMATS)}, got {path.name}")
     return path
 
 
@@ -42,7 +42,7 @@ def _colour(name: str) -> str | None:
     return None
 
 
-def figure(
+def figure(  # noqa: PLR0913 (keyword-only: each panel's data, by name)
     *,
     title: str,
     t: FloatArray,

@@ -32,10 +32,11 @@ import numpy as np
 
 from altfuse import __version__
 from altfuse.errors import ParameterError
+from altfuse.inertial import G
 from altfuse.io.dataflash_writer import DataFlashWriter
 from altfuse.model import FloatArray
+from altfuse.params import InvalidParameter
 
-G = 9.80665
 HOME_AMSL_M = 112.0
 HOME_LAT, HOME_LNG = -35.363261, 149.165230  # ArduPilot's simulator home
 GPS_WEEK, GPS_MS_OF_WEEK = 2400, 200_000_000
@@ -231,7 +232,7 @@ def _fault_window(duration_s: float, start: float, length_s: float) -> tuple[flo
     return start * duration_s, start * duration_s + length_s
 
 
-def simulate_flight(
+def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn, top to bottom)
     scenario: str = "mission",
     seed: int = 0,
     duration_s: float | None = None,
@@ -243,8 +244,9 @@ def simulate_flight(
     spec = SCENARIOS[scenario]
     duration = spec.default_duration_s if duration_s is None else float(duration_s)
     if not (np.isfinite(duration) and duration >= spec.min_duration_s):
-        raise ParameterError(
-            f"--duration must be at least {spec.min_duration_s:g} s for {scenario}, got {duration}"
+        raise InvalidParameter(
+            "duration_s",
+            f"must be at least {spec.min_duration_s:g} s for {scenario}, got {duration}",
         )
     unknown = [f for f in faults if f not in FAULTS]
     if unknown:

@@ -12,12 +12,13 @@ import os
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
-from altfuse.pipeline import FuseRun
+if TYPE_CHECKING:
+    from altfuse.pipeline import FuseRun
 
 FLOAT_FORMAT = "%.6f"
 

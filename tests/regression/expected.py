@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from altfuse.evaluate import evaluate
+from altfuse.evaluation import evaluate
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = sorted((ROOT / "sample_logs").glob("*.bin"))

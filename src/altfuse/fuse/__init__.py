@@ -1,42 +1,86 @@
-"""Fusion methods. ``FUSERS`` is the only registry: the CLI's ``--method`` choices and the
-contract tests both come from it, so a method is added by registering it here.
+"""Fusion methods. ``METHODS`` is the only registry: the CLI's ``--method`` choices, each
+method's options and the contract tests all come from it, so a method is added by writing its
+module and registering it here.
 
-Every fuser takes the heights of ``n`` sensors on one clock, shape (T, n) with NaN where a sensor
-is absent, plus keyword-only parameters, and returns a :class:`FusionResult`. A fuser that needs
-more from the log names it as a keyword in ``LOG_INPUTS``; the pipeline supplies it.
+Every method is a :class:`Method`: a function ``(FusionInput, Params) -> FusionResult``, its frozen
+parameter type, and the log inputs it asks the pipeline for (``uses``, ``requires``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Iterable, Mapping
+from typing import Any
 
-from altfuse.fuse.base import FusionResult
-from altfuse.fuse.complementary import fuse_multilayer
-from altfuse.fuse.delay import fuse_delay1, fuse_delay2
+from altfuse.errors import ParameterError
+from altfuse.fuse.base import FusionInput, FusionResult, Method
+from altfuse.fuse.complementary import MultilayerParams, fuse_multilayer
+from altfuse.fuse.delay import DelayParams, fuse_delay1, fuse_delay2
 from altfuse.fuse.mean import fuse_mean
-from altfuse.fuse.smoother import fuse_smoother
-from altfuse.fuse.support import fuse_support
+from altfuse.fuse.smoother import SmootherParams, fuse_smoother
+from altfuse.fuse.support import SupportParams, fuse_support
+from altfuse.params import InvalidParameter, Params, fields
 
-FUSERS: dict[str, Callable[..., FusionResult]] = {
-    "mean": fuse_mean,
-    "support": fuse_support,
-    "delay1": fuse_delay1,
-    "delay2": fuse_delay2,
-    "multilayer": fuse_multilayer,
-    "smoother": fuse_smoother,
+METHODS: dict[str, Method[Any]] = {
+    "mean": Method(fuse_mean, Params, "equal weights (Paper A's baseline)"),
+    "support": Method(fuse_support, SupportParams, "observation-support weighting (Paper A)"),
+    "delay1": Method(fuse_delay1, DelayParams, "one-step delay fusion (Paper B's baseline)"),
+    "delay2": Method(fuse_delay2, DelayParams, "two-step delay fusion (Paper B, layer 1)"),
+    "multilayer": Method(
+        fuse_multilayer,
+        MultilayerParams,
+        "two-step delay and a complementary filter with the accelerometer (Paper B)",
+        uses=frozenset({"accel"}),
+        requires=frozenset({"accel"}),
+    ),
+    "smoother": Method(
+        fuse_smoother,
+        SmootherParams,
+        "offline Kalman smoother over the whole flight",
+        uses=frozenset({"accel"}),
+    ),
 }
 
-#: Keyword arguments a fuser may take that come from the log, not from the user: the earth-frame
-#: vertical acceleration on the clock [m/s²] (accel_up) or as samples (accel: times, values; None
-#: without IMU/ATT), the clock's tick [s] (dt_s) and times (t), and each sensor's own referred
-#: samples (samples), kinds and names, the span in which the vehicle stood at the take-off point
-#: (on_ground), the horizontal speed samples (speed) and each sensor's temperature samples
-#: (temperatures, a list in the sensors' order); None when the log cannot tell.
-LOG_INPUTS = frozenset(
-    {
-        "accel_up", "dt_s", "accel", "t", "samples", "kinds", "names",
-        "on_ground", "speed", "temperatures",
-    }
-)  # fmt: skip
 
-__all__ = ["FUSERS", "LOG_INPUTS", "FusionResult"]
+def method(name: str) -> Method[Any]:
+    """The registered method ``name``, or a :class:`ParameterError` naming the choices."""
+    if name not in METHODS:
+        raise ParameterError(f"unknown method {name!r}; choose one of {', '.join(METHODS)}")
+    return METHODS[name]
+
+
+def params_for(name: str, values: Mapping[str, Any]) -> Params:
+    """Method ``name``'s parameters from ``values`` by field name, the others at their
+    defaults; a name the method does not take is refused, saying which it takes."""
+    params_type = method(name).params
+    taken = [f.name for f in fields(params_type)]
+    unknown = sorted(set(values) - set(taken))
+    if unknown:
+        takes = f"it takes {', '.join(taken)}" if taken else "it takes none"
+        raise InvalidParameter(unknown[0], f"is not a parameter of method {name!r}; {takes}")
+    params: Params = params_type(**values)
+    return params
+
+
+def params_by_method(values: Mapping[str, Any], names: Iterable[str]) -> dict[str, Params]:
+    """The parameters of each method in ``names`` that takes any of ``values`` (by field
+    name; every such method gets the value), the rest at their defaults; a value none of them
+    takes is refused."""
+    names = list(names)
+    taken = {n: {f.name for f in fields(method(n).params)} for n in names}
+    unused = sorted(v for v in values if not any(v in t for t in taken.values()))
+    if unused:
+        which = f"method {names[0]!r}" if len(names) == 1 else f"any of {', '.join(names)}"
+        raise InvalidParameter(unused[0], f"does not apply to {which}")
+    given = {n: {k: v for k, v in values.items() if k in taken[n]} for n in names}
+    return {n: params_for(n, mine) for n, mine in given.items() if mine}
+
+
+__all__ = [
+    "METHODS",
+    "FusionInput",
+    "FusionResult",
+    "Method",
+    "method",
+    "params_by_method",
+    "params_for",
+]

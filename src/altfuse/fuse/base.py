@@ -1,20 +1,111 @@
-"""What every fusion method returns, and the weighted combination they share."""
+"""The contract of every fusion method: what it takes (:class:`FusionInput` and its own frozen
+parameters), what it declares (:class:`Method`), what it returns (:class:`FusionResult`), and
+the weighted combination most of them share (:func:`combine`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Final, Generic, Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
-from altfuse.model import FloatArray
+from altfuse.inertial import VerticalAcceleration
+from altfuse.model import FloatArray, Samples, SensorKind
+from altfuse.params import Params
 
 #: Per-tick status of the fused value.
-FUSED = "fused"  # weighted as the method says
-EQUAL = "equal"  # the method's weights were all zero: equal weights over the valid sensors
-SINGLE = "single"  # one valid sensor: the result is that sensor
-NONE = "none"  # no valid sensor: the result is NaN
-INERTIAL = "inertial"  # no valid sensor, the accelerometer carried the estimate (multilayer)
+Status = Literal["fused", "equal", "single", "none", "inertial"]
+FUSED: Final[Status] = "fused"  # weighted as the method says
+EQUAL: Final[Status] = "equal"  # the method's weights were all zero: equal weights over the valid
+SINGLE: Final[Status] = "single"  # one valid sensor: the result is that sensor
+NONE: Final[Status] = "none"  # no valid sensor: the result is NaN
+INERTIAL: Final[Status] = "inertial"  # no valid sensor; the accelerometer carried the estimate
+
+#: What a method may ask the pipeline to compute from the log beyond what every method gets.
+LogInput = Literal["accel"]
+
+
+@dataclass(frozen=True)
+class FusionInput:
+    """Everything a method fuses, from one log, on one clock and one datum.
+
+    Attributes
+    ----------
+    t
+        The clock [s], shape (T,), uniform with tick ``dt_s``.
+    z
+        Each sensor's height above take-off [m] on the clock, shape (T, n); NaN where absent.
+    names, kinds
+        Each sensor's name (``gps``, ``baro2``, ...) and kind, in ``z``'s column order.
+    samples
+        Each sensor's own samples, referred to take-off like ``z``, in ``z``'s order.
+    dt_s
+        The clock's tick [s].
+    on_ground_s
+        A span [s] in which the vehicle stood at the take-off point; None if the log cannot tell.
+    speed
+        Horizontal speed over ground [m/s] samples; None if the log has none.
+    temperatures
+        Each sensor's temperature [degC] samples or None, in ``z``'s order.
+    accel
+        The vertical acceleration, for a method that ``uses`` ``"accel"``; None otherwise and
+        when the log has no IMU or attitude.
+    """
+
+    t: FloatArray
+    z: FloatArray
+    names: tuple[str, ...]
+    kinds: tuple[SensorKind, ...]
+    samples: tuple[Samples, ...]
+    dt_s: float
+    on_ground_s: tuple[float, float] | None = None
+    speed: Samples | None = None
+    temperatures: tuple[Samples | None, ...] = ()
+    accel: VerticalAcceleration | None = None
+
+    def __post_init__(self) -> None:
+        n = self.z.shape[1] if self.z.ndim == 2 else -1
+        if self.z.shape[:1] != self.t.shape or n < 0:
+            raise ValueError(f"z has shape {self.z.shape} for a clock of {self.t.size} ticks")
+        for what in ("names", "kinds", "samples"):
+            if len(getattr(self, what)) != n:
+                raise ValueError(f"{len(getattr(self, what))} {what} for {n} sensors")
+        if not self.temperatures:
+            object.__setattr__(self, "temperatures", (None,) * n)
+        if self.accel is not None and self.accel.on_clock.shape != self.t.shape:
+            shape = self.accel.on_clock.shape
+            raise ValueError(f"accel has shape {shape} for a clock of {self.t.size} ticks")
+
+    @classmethod
+    def from_heights(
+        cls,
+        z: FloatArray,
+        dt_s: float = 0.1,
+        kinds: Sequence[SensorKind] | None = None,
+        names: Sequence[str] | None = None,
+        accel_up: FloatArray | None = None,
+    ) -> FusionInput:
+        """Heights already on a clock ``k dt_s``: each sensor's samples are its valid ticks.
+        ``kinds`` default to gps, baro, rangefinder, gps, ... in turn; ``names`` to the kinds,
+        numbered from the second of a kind on (``gps2``), as the readers name them;
+        ``accel_up`` [m/s², up, at rest 0] is the vertical acceleration at the ticks."""
+        z = np.asarray(z, dtype=np.float64)
+        t = np.asarray(np.arange(z.shape[0]) * dt_s, dtype=np.float64)
+        cycle: tuple[SensorKind, ...] = ("gps", "baro", "rangefinder")
+        kinds = tuple(kinds or [cycle[i % 3] for i in range(z.shape[1])])
+        if names is None:
+            seen = [kinds[:i].count(k) for i, k in enumerate(kinds)]
+            names = [k if c == 0 else f"{k}{c + 1}" for k, c in zip(kinds, seen, strict=True)]
+        names = tuple(names)
+        ok = np.isfinite(z)
+        samples = tuple(Samples(t[ok[:, i]], z[ok[:, i], i]) for i in range(z.shape[1]))
+        accel = None
+        if accel_up is not None:
+            record = {"source": "given at the clock's ticks"}
+            accel = VerticalAcceleration(Samples(t, accel_up), accel_up, record)
+        return cls(t, z, names, kinds, samples, dt_s, accel=accel)
 
 
 @dataclass(frozen=True)
@@ -42,7 +133,7 @@ class FusionResult:
     method: str
     fused: FloatArray
     weights: FloatArray
-    status: npt.NDArray[np.str_]
+    status: npt.NDArray[np.str_]  # of Status
     traces: dict[str, FloatArray] = field(default_factory=dict)
     tick_traces: dict[str, FloatArray] = field(default_factory=dict)
     params: dict[str, float | int | str] = field(default_factory=dict)
@@ -84,3 +175,40 @@ def combine(
         tick_traces=tick_traces or {},
         params=params or {},
     )
+
+
+P = TypeVar("P", bound=Params)
+
+
+@dataclass(frozen=True)
+class Method(Generic[P]):
+    """A registered fusion method: its function, its parameters' type and what it needs.
+
+    Attributes
+    ----------
+    function
+        ``function(inputs, params) -> FusionResult``; never touches files.
+    params
+        Its frozen parameter dataclass (fields made with :func:`altfuse.params.param`): the CLI's
+        options and their checks come from it. ``Params`` itself for a method without any.
+    summary
+        One line for the help.
+    uses
+        Inputs the pipeline computes for it only (``accel``: the vertical acceleration).
+    requires
+        Those of ``uses`` without which it cannot run: the pipeline refuses the log in one line.
+    """
+
+    function: Callable[[FusionInput, P], FusionResult]
+    params: type[P]
+    summary: str
+    uses: frozenset[LogInput] = frozenset()
+    requires: frozenset[LogInput] = frozenset()
+
+    def __post_init__(self) -> None:
+        if not self.requires <= self.uses:
+            raise ValueError(f"requires {set(self.requires)} beyond uses {set(self.uses)}")
+
+    def __call__(self, inputs: FusionInput, params: P | None = None) -> FusionResult:
+        """Run the method, with its default parameters unless ``params`` are given."""
+        return self.function(inputs, self.params() if params is None else params)

@@ -35,21 +35,38 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from altfuse.errors import ParameterError
-from altfuse.fuse.base import INERTIAL, FusionResult
-from altfuse.fuse.delay import layer1
+from altfuse.fuse.base import INERTIAL, FusionInput, FusionResult
+from altfuse.fuse.delay import DelayParams, layer1, process_noise
 from altfuse.model import FloatArray
+from altfuse.params import param
 
-#: Defaults measured on the seeded hover of tests/conftest.py (8 seeds) and the sample log: layer 1
-#: with q >= 0.5 leaves the smoothing to layer 2, which has the accelerometer (hover RMSE 0.370 m
-#: at q 0.5 against 0.444 m at q 0.05); T = 1 s beat 0.5, 2, 3 and 5 s on the hover and tied on
-#: the moving sample flight.
-DEFAULT_LAYER1_Q = 0.5
-DEFAULT_T_S = 1.0
-DEFAULT_E_MAX_M = 3.0
-DEFAULT_REOPEN_S = 2.0
 #: Longest stretch [s] the filter integrates the accelerometer with no layer-1 value.
 MAX_COAST_S = 2.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class MultilayerParams(DelayParams):
+    """Layer 1's (as ``delay2``'s) and the complementary filter's parameters.
+
+    Defaults measured on the seeded hover of tests/conftest.py (8 seeds) and the sample log:
+    layer 1 with q >= 5 m²/s (0.5 m² per 0.1 s tick) leaves the smoothing to layer 2, which has
+    the accelerometer (hover RMSE 0.370 m at 5 m²/s against 0.444 m at 0.5 m²/s); T = 1 s beat
+    0.5, 2, 3 and 5 s on the hover and tied on the moving sample flight.
+    """
+
+    q_m2_s: float = process_noise(5.0)
+    time_constant_s: float = param(
+        1.0, help="time constant T of the complementary filter", unit="s", check="positive"
+    )
+    e_max_m: float = param(
+        3.0, help="gate threshold on the correction e", unit="m", check="positive"
+    )
+    reopen_s: float = param(
+        2.0,
+        help="how long a shut gate stays shut before it reopens",
+        unit="s",
+        check="non-negative",
+    )
 
 
 @dataclass(frozen=True)
@@ -66,9 +83,9 @@ def complementary_filter(
     z: FloatArray,
     a: FloatArray,
     dt: float,
-    time_constant_s: float = DEFAULT_T_S,
-    e_max_m: float = DEFAULT_E_MAX_M,
-    reopen_s: float = DEFAULT_REOPEN_S,
+    time_constant_s: float = 1.0,
+    e_max_m: float = 3.0,
+    reopen_s: float = 2.0,
 ) -> Complementary:
     """Run the adaptive complementary filter (3.5) over ``z`` [m] and ``a`` [m/s², up]."""
     T = time_constant_s
@@ -112,49 +129,25 @@ def complementary_filter(
     return Complementary(x, v, e, k)
 
 
-def fuse_multilayer(
-    z: FloatArray,
-    *,
-    accel_up: FloatArray,
-    dt_s: float,
-    form: str = "practical",
-    q: float = DEFAULT_LAYER1_Q,
-    time_constant: float = DEFAULT_T_S,
-    e_max: float = DEFAULT_E_MAX_M,
-    reopen: float = DEFAULT_REOPEN_S,
-) -> FusionResult:
-    """Paper B's full method: layer 1 (``delay2``: 3.3 then 3.4), then layer 2 (3.5).
-
-    Parameters
-    ----------
-    z
-        Heights [m], shape (T, n); NaN where a sensor is absent.
-    accel_up
-        Earth-frame vertical acceleration on the same clock [m/s², up, gravity removed].
-    dt_s
-        Tick of the clock [s].
-    form, q
-        Layer 1's temporal form and process noise [m² per tick], as in ``delay2``; the default
-        is larger than ``delay2``'s, leaving the smoothing to the accelerometer-aided layer 2.
-    time_constant
-        ``T`` [s] of the complementary filter.
-    e_max
-        Gate threshold [m] on the correction ``e``.
-    reopen
-        Seconds after which a shut gate reopens (a departure from the paper, see module doc).
+def fuse_multilayer(inputs: FusionInput, params: MultilayerParams) -> FusionResult:
+    """Paper B's full method: layer 1 (``delay2``: 3.3 then 3.4), then layer 2 (3.5) with
+    ``inputs.accel``'s vertical acceleration on the clock.
 
     The weights are layer 1's spatial weights ``W_i``: layer 2 mixes the accelerometer into their
     combination and has no per-sensor weight of its own.
     """
-    for name, value in (("--time-constant", time_constant), ("--e-max", e_max)):
-        if not (math.isfinite(value) and value > 0):
-            raise ParameterError(f"{name} must be a positive number, got {value}")
-    if not (math.isfinite(reopen) and reopen >= 0):
-        raise ParameterError(f"--reopen must be a number of seconds >= 0, got {reopen}")
-    if accel_up.shape != z.shape[:1]:
-        raise ValueError(f"accel_up has shape {accel_up.shape}, z has {z.shape[0]} ticks")
-    first = layer1(z, 2, form, q)
-    cf = complementary_filter(first.fused, accel_up, dt_s, time_constant, e_max, reopen)
+    if inputs.accel is None:
+        raise ValueError("multilayer needs the vertical acceleration (inputs.accel)")
+    accel_up = inputs.accel.on_clock
+    first = layer1(inputs, 2, params)
+    cf = complementary_filter(
+        first.fused,
+        accel_up,
+        inputs.dt_s,
+        params.time_constant_s,
+        params.e_max_m,
+        params.reopen_s,
+    )
     status = np.where(np.isnan(first.fused) & np.isfinite(cf.x), INERTIAL, first.status)
     return FusionResult(
         method="multilayer",
@@ -172,8 +165,8 @@ def fuse_multilayer(
         },
         params={
             **first.params,
-            "time_constant_s": time_constant,
-            "e_max_m": e_max,
-            "reopen_s": reopen,
+            "time_constant_s": params.time_constant_s,
+            "e_max_m": params.e_max_m,
+            "reopen_s": params.reopen_s,
         },
     )

@@ -32,7 +32,9 @@ Both model a *constant* altitude (the paper's hover): ``P+`` shrinks towards 0 a
 freezes. ``form="paper"`` is that, faithfully. ``form="practical"`` (the default: on the moving
 sample flight the paper's form is 6.4 m RMS off, the practical 0.79 m) inflates each previous
 variance by the process noise of the steps since, ``P+(k-1) + q`` and ``P+(k-2) + 2 q``,
-which makes the recursion a random-walk filter that follows a moving vehicle.
+which makes the recursion a random-walk filter that follows a moving vehicle. ``q`` is per tick
+in the recursion; the parameter is the random walk's density ``q_m2_s`` [m²/s], ``q = q_m2_s dt``,
+so that the filter means the same at any clock rate.
 
 Spatial weighting (3.4) over the sensors measured at ``k``::
 
@@ -53,24 +55,45 @@ auto-covariance ``R_pp`` (no cross-covariance to subtract).
 
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
 
-from altfuse.errors import ParameterError
-from altfuse.fuse.base import FusionResult, combine
+from altfuse.fuse.base import FusionInput, FusionResult, combine
 from altfuse.model import FloatArray
+from altfuse.params import Params, param
 
 #: Smallest measurement variance [m²]: keeps 1/delta2 finite where the estimate is 0 (the first
 #: sample has no spread) or negative (cross-covariance larger than auto-covariance by chance).
 VARIANCE_FLOOR_M2 = 1e-4
-#: Process noise of the practical form [m² per tick]: 0.05 m² per 0.1 s tick is a vertical random
-#: walk of ~0.7 m/√s. Measured: best of 0.01-5 for delay1 on the seeded hover (RMSE 0.381 m);
-#: every value within 1 % on the moving sample flight.
-DEFAULT_Q = 0.05
 #: Smallest estimate variance P+ [m²]: only numerical (the paper's form drives P+ towards 0).
 ESTIMATE_FLOOR_M2 = 1e-12
-FORMS = ("practical", "paper")
+Form = Literal["practical", "paper"]
+
+
+def process_noise(default_m2_s: float) -> Any:
+    """The practical form's process noise ``q_m2_s``, a parameter field with this default."""
+    return param(
+        default_m2_s,
+        help="process noise of the practical form, a random walk's density",
+        unit="m^2/s",
+        check="non-negative",
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class DelayParams(Params):
+    """Layer 1's temporal recursion (3.2, 3.3)."""
+
+    form: Form = param(
+        "practical",
+        help="temporal recursion: 'practical' (a random walk) or 'paper' (a constant altitude)",
+    )
+    #: 0.5 m²/s (0.05 m² per 0.1 s tick) is a vertical random walk of ~0.7 m/√s. Measured: best
+    #: of 0.01-5 m² per tick for delay1 on the seeded hover (RMSE 0.381 m); every value within
+    #: 1 % on the moving sample flight.
+    q_m2_s: float = process_noise(0.5)
 
 
 def measurement_variances(z: FloatArray) -> FloatArray:
@@ -120,9 +143,10 @@ def measurement_variances(z: FloatArray) -> FloatArray:
 
 
 def temporal_fusion(
-    z: FloatArray, delta2: FloatArray, steps: int, form: str = "practical", q: float = DEFAULT_Q
+    z: FloatArray, delta2: FloatArray, steps: int, form: Form, q: float
 ) -> tuple[FloatArray, FloatArray]:
-    """One-step (3.2, ``steps=1``) or two-step (3.3, ``steps=2``) delay fusion of each sensor.
+    """One-step (3.2, ``steps=1``) or two-step (3.3, ``steps=2``) delay fusion of each sensor,
+    with the process noise ``q`` [m² per tick] of the practical form.
 
     Returns the estimates ``Z+`` and their variances ``P+``, shape (T, n); NaN before a sensor's
     first sample.
@@ -177,16 +201,10 @@ def spatial_weights(pplus: FloatArray, valid: FloatArray) -> FloatArray:
         return np.where(total > 0, inv / total, np.nan)
 
 
-def check_delay_parameters(form: str, q: float) -> None:
-    if form not in FORMS:
-        raise ParameterError(f"--form must be one of {', '.join(FORMS)}, got {form!r}")
-    if not (math.isfinite(q) and q >= 0):
-        raise ParameterError(f"--q must be a number >= 0 (m^2 per tick), got {q}")
-
-
-def layer1(z: FloatArray, steps: int, form: str, q: float) -> FusionResult:
+def layer1(inputs: FusionInput, steps: int, params: DelayParams) -> FusionResult:
     """Temporal (3.2 or 3.3), then spatial (3.4) fusion, with ``P*`` as a per-tick trace."""
-    check_delay_parameters(form, q)
+    z, form = inputs.z, params.form
+    q = params.q_m2_s * inputs.dt_s
     delta2 = measurement_variances(z)
     zplus, pplus = temporal_fusion(z, delta2, steps, form, q)
     valid = np.isfinite(z)
@@ -201,28 +219,17 @@ def layer1(z: FloatArray, steps: int, form: str, q: float) -> FusionResult:
         f"delay{steps}",
         traces={"variance": delta2, "temporal_estimate": zplus, "temporal_variance": pplus},
         tick_traces={"fused_variance": pstar},
-        params={"form": form, "q": float(q) if form == "practical" else 0.0},
+        params={"form": form, "q_m2_s": params.q_m2_s if form == "practical" else 0.0},
     )
 
 
-def fuse_delay1(z: FloatArray, *, form: str = "practical", q: float = DEFAULT_Q) -> FusionResult:
-    """Paper B's baseline: one-step delay temporal fusion (3.2), then spatial weighting (3.4).
-
-    Parameters
-    ----------
-    z
-        Heights [m], shape (T, n); NaN where a sensor is absent.
-    form
-        ``practical`` (random walk, process noise ``q``) or ``paper`` (constant altitude).
-    q
-        Process noise [m² per tick] of the practical form.
-    """
-    return layer1(z, 1, form, q)
+def fuse_delay1(inputs: FusionInput, params: DelayParams) -> FusionResult:
+    """Paper B's baseline: one-step delay temporal fusion (3.2), then spatial weighting (3.4),
+    of ``inputs.z`` [m]."""
+    return layer1(inputs, 1, params)
 
 
-def fuse_delay2(z: FloatArray, *, form: str = "practical", q: float = DEFAULT_Q) -> FusionResult:
-    """Paper B's first layer: two-step delay temporal fusion (3.3), then spatial weighting (3.4).
-
-    Parameters as :func:`fuse_delay1`.
-    """
-    return layer1(z, 2, form, q)
+def fuse_delay2(inputs: FusionInput, params: DelayParams) -> FusionResult:
+    """Paper B's first layer: two-step delay temporal fusion (3.3), then spatial weighting (3.4),
+    of ``inputs.z`` [m]."""
+    return layer1(inputs, 2, params)

@@ -64,8 +64,8 @@ The offsets' random-walk densities are physical defaults (``Q_OFFSET``: a GPS's 
 wanders by about 1 m over 100 s; a barometer, once its temperature is modelled, by centimetres),
 not estimates: with two drifting sensors the log fixes only the sum of their densities, and
 splitting it evenly (the method of moments, and EM, which did not move from there) gave the
-barometer the GPS's wander (hover RMSE 0.35 m against 0.07 m with the defaults). ``--sigma``,
-``--offset-noise``, ``--accel-noise`` and ``--gate`` override.
+barometer the GPS's wander (hover RMSE 0.35 m against 0.07 m with the defaults).
+:class:`SmootherParams` overrides (``--sigma``, ``--offset-noise``, ``--accel-noise``, ``--gate``).
 
 Innovation gating: a sample whose innovation exceeds ``gate`` standard deviations (3.5) is
 rejected, counted per sensor and traced. At 5 sigma, Paper A's barometer excursion was accepted
@@ -93,15 +93,15 @@ in the number of events: one forward and one backward step each.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-from altfuse.errors import ParameterError
-from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionResult
-from altfuse.model import FloatArray
+from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult
+from altfuse.model import FloatArray, Samples
+from altfuse.params import InvalidParameter, Params, param
 
 #: Process noise defaults (power spectral densities): white acceleration [m^2/s^3] with and
 #: without the accelerometer, bias random walk [m^2/s^5], offset random walks [m^2/s] for GPS and
@@ -115,7 +115,6 @@ Q_OFFSET = {"gps": 0.01, "baro": 1e-4, "rangefinder": 0.3}
 #: tell, and its floor in time [m^2/s] (grass, waves: about 3 cm over 100 s).
 Q_TERRAIN_PER_M = 0.05
 Q_GROUND_STILL = 1e-5
-DEFAULT_GATE = 3.5
 #: Prior on a barometer's temperature coefficient [m/degC] (a constant, learnt from the flight).
 THERMAL_PRIOR = 0.5
 #: A barometer's drift rate [m/s]: its prior at the start, and its random-walk density
@@ -134,6 +133,35 @@ Q_TERRAIN_MAX = 1.0
 MAX_SPEED_M_S = 100.0
 _MIN_SIGMA_M = 0.01
 _MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True, kw_only=True)
+class SmootherParams(Params):
+    """What the smoother takes from the user; everything else it learns from the log."""
+
+    gate_sigma: float = param(3.5, help="innovation gate", unit="sigma", check="positive")
+    accel_noise_m2_s3: float | None = param(
+        None,
+        help="white acceleration noise density",
+        unit="m^2/s^3",
+        check="positive",
+        default_text=f"from the accelerometer's noise, {Q_ACCEL_NO_IMU:g} without IMU",
+    )
+    sigma_m: Mapping[str, float] = param(
+        {},
+        help="a sensor's measurement noise",
+        unit="m",
+        check="positive",
+        default_text="from the log",
+    )
+    offset_noise_m2_s: Mapping[str, float] = param(
+        {},
+        help="random-walk density of a sensor's offset (a rangefinder's ground height)",
+        unit="m^2/s",
+        check="positive",
+        default_text=f"gps {Q_OFFSET['gps']:g}, baro {Q_OFFSET['baro']:g}; rangefinder from the "
+        "terrain and the speed",
+    )
 
 
 def _mad_sigma(x: FloatArray) -> float:
@@ -189,8 +217,8 @@ def terrain_noise(d: FloatArray, flown: FloatArray, lag: int) -> float:
     return max(slope, 0.0)
 
 
-def _events(
-    samples: Sequence[tuple[FloatArray, FloatArray]], ticks: FloatArray
+def _merge_events(
+    samples: Sequence[Samples], ticks: FloatArray
 ) -> tuple[FloatArray, np.ndarray, FloatArray, np.ndarray]:
     """All sample and tick times in order: (time, sensor index or -1 for a tick, value, and
     each event's position in its sensor's samples)."""
@@ -205,7 +233,7 @@ def _events(
     return t[order], who[order], np.concatenate(values)[order], np.concatenate(position)[order]
 
 
-def _interval_mean(series: tuple[FloatArray, FloatArray], t: FloatArray) -> FloatArray:
+def _interval_mean(series: Samples, t: FloatArray) -> FloatArray:
     """The mean of a sampled signal over each interval between consecutive times ``t`` (the
     samples integrated exactly, trapezoids); NaN where ``t`` leaves the samples' span."""
     ts, v = series
@@ -221,8 +249,8 @@ def _interval_mean(series: tuple[FloatArray, FloatArray], t: FloatArray) -> Floa
 
 
 def _thermal(
-    temperatures: Sequence[tuple[FloatArray, FloatArray] | None] | None,
-    samples: Sequence[tuple[FloatArray, FloatArray]],
+    temperatures: Sequence[Samples | None],
+    samples: Sequence[Samples],
     who: np.ndarray,
     position: np.ndarray,
     m: int,
@@ -231,7 +259,7 @@ def _thermal(
     less the sensor's first one [degC] (0 for the others)."""
     tstate = np.full(m, -1)
     dtemp = np.zeros(who.size)
-    for i, temp in enumerate(temperatures or [None] * m):
+    for i, temp in enumerate(temperatures):
         if temp is None or temp[0].size < 2 or not samples[i][0].size:
             continue
         order = np.argsort(temp[0], kind="stable")
@@ -281,33 +309,80 @@ def _transition(dt: float, n: int, use_bias: bool, drifts: np.ndarray) -> FloatA
     return f
 
 
-def _run(
-    t: FloatArray,
-    who: np.ndarray,
-    z: FloatArray,
-    a: FloatArray,
-    r: FloatArray,
-    q_accel: float,
-    q_state: FloatArray,
-    use_bias: bool,
-    gate: float,
-    h0: float,
-    still: np.ndarray,
-    layout: _Layout,
-    smooth: bool = True,
-) -> dict[str, np.ndarray]:
+@dataclass(frozen=True)
+class _Events:
+    """What the forward pass steps through, one entry per event (a sample or a clock tick).
+
+    ``who``: the sensor of a sample, -1 for a tick; ``z``: the sample's value; ``a``: the mean
+    vertical acceleration over the interval ending at the event; ``q_state`` (events, m): the
+    sensor states' random-walk densities over that interval; ``still``: the events at which the
+    vehicle is known to stand at the take-off point; ``h0``: the first height guess.
+    """
+
+    t: FloatArray
+    who: np.ndarray
+    z: FloatArray
+    a: FloatArray
+    q_state: FloatArray
+    still: np.ndarray
+    q_accel: float
+    use_bias: bool
+    gate: float
+    h0: float
+
+
+def _process_noise(ev: _Events, k: int, dt: float, n: int, drifts: np.ndarray) -> FloatArray:
+    """Q over the interval ``dt`` ending at event ``k``: white acceleration on (h, v), the bias's
+    and the sensor states' random walks, and each drifting offset's integrated random walk."""
+    m = ev.q_state.shape[1]
+    q = np.zeros((n, n))
+    q_accel = ev.q_accel
+    q[0, 0], q[0, 1], q[1, 1] = q_accel * dt**3 / 3, q_accel * dt**2 / 2, q_accel * dt
+    q[1, 0] = q[0, 1]
+    q[2, 2] = Q_BIAS * dt if ev.use_bias else 0.0
+    q[3 : 3 + m, 3 : 3 + m] = np.diag(ev.q_state[k] * dt)
+    for c, rate in drifts:  # a drifting offset: an integrated random walk
+        q[c, c] += Q_DRIFT * dt**3 / 3
+        q[c, rate] = q[rate, c] = Q_DRIFT * dt**2 / 2
+        q[rate, rate] = Q_DRIFT * dt
+    return q
+
+
+def _hold_still(x: FloatArray, p: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """On the ground before take-off: h = 0 and v = 0 (the datum's definition)."""
+    for j in (0, 1):
+        s = p[j, j] + STILL_SIGMA**2
+        kg = p[:, j] / s
+        x = x - kg * x[j]
+        p = p - np.outer(kg, p[j])
+    return x, p
+
+
+def _rts(
+    ev: _Events, layout: _Layout, filtered: tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+) -> tuple[FloatArray, FloatArray]:
+    """Rauch-Tung-Striebel: x_s(k) = x_f(k) + C (x_s(k+1) - x_p(k+1)), C = P_f F^T P_p(k+1)^-1."""
+    xp, pp, xf, pf = filtered
+    xs, ps = xf.copy(), pf.copy()
+    for k in range(ev.t.size - 2, -1, -1):
+        f = _transition(ev.t[k + 1] - ev.t[k], layout.n, ev.use_bias, layout.drift_pairs)
+        c = np.linalg.solve(pp[k + 1].T, (pf[k] @ f.T).T).T
+        xs[k] = xf[k] + c @ (xs[k + 1] - xp[k + 1])
+        ps[k] = pf[k] + c @ (ps[k + 1] - pp[k + 1]) @ c.T
+    return xs, ps
+
+
+def _run(ev: _Events, r: FloatArray, layout: _Layout, smooth: bool = True) -> dict[str, np.ndarray]:
     """Forward filter and (if ``smooth``) RTS pass over the events: the states and diagnostics.
 
-    ``r`` is each event's measurement variance; ``q_state`` (events, m) the sensor states'
-    random-walk densities over the interval ending at each event; ``still`` marks the events at
-    which the vehicle is known to stand at the take-off point; ``h0`` the first height guess.
-    Also each accepted sample's log-likelihood (its innovation's density; NaN elsewhere): the
-    evidence by which :func:`_drift_gain` compares two models.
+    ``r`` is each event's measurement variance. Also each accepted sample's log-likelihood (its
+    innovation's density; NaN elsewhere): the evidence by which :func:`_drift_gain` compares two
+    models.
     """
     sign, tstate, dtemp, drifts = layout.sign, layout.thermal, layout.dtemp, layout.drift_pairs
     m, n = sign.size, layout.n
     n_thermal = int((tstate >= 0).sum())
-    count = t.size
+    count = ev.t.size
     loglik = np.full(count, np.nan)
     xp = np.zeros((count, n))
     pp = np.zeros((count, n, n))
@@ -316,69 +391,48 @@ def _run(
     gain_h = np.zeros(count)
     accepted = np.zeros(count, dtype=bool)
     x = np.zeros(n)
-    x[0] = h0
+    x[0] = ev.h0
     # without the accelerometer the bias is inert: a tiny fixed variance keeps P invertible
     p = np.diag(
-        [10.0**2, 3.0**2, 0.1**2 if use_bias else 1e-9]
+        [10.0**2, 3.0**2, 0.1**2 if ev.use_bias else 1e-9]
         + [1.0**2] * m
         + [THERMAL_PRIOR**2] * n_thermal
         + [DRIFT_PRIOR**2] * (n - 3 - m - n_thermal)
     )
-    previous = t[0]
+    previous = ev.t[0]
     for k in range(count):
-        dt = t[k] - previous
-        previous = t[k]
+        dt = ev.t[k] - previous
+        previous = ev.t[k]
         if dt > 0:
-            f = _transition(dt, n, use_bias, drifts)
+            f = _transition(dt, n, ev.use_bias, drifts)
             x = f @ x
-            x[0] += 0.5 * a[k] * dt * dt
-            x[1] += a[k] * dt
-            q = np.zeros((n, n))
-            q[0, 0], q[0, 1], q[1, 1] = q_accel * dt**3 / 3, q_accel * dt**2 / 2, q_accel * dt
-            q[1, 0] = q[0, 1]
-            q[2, 2] = Q_BIAS * dt if use_bias else 0.0
-            q[3 : 3 + m, 3 : 3 + m] = np.diag(q_state[k] * dt)
-            for c, rate in drifts:  # a drifting offset: an integrated random walk
-                q[c, c] += Q_DRIFT * dt**3 / 3
-                q[c, rate] = q[rate, c] = Q_DRIFT * dt**2 / 2
-                q[rate, rate] = Q_DRIFT * dt
-            p = f @ p @ f.T + q
+            x[0] += 0.5 * ev.a[k] * dt * dt
+            x[1] += ev.a[k] * dt
+            p = f @ p @ f.T + _process_noise(ev, k, dt, n, drifts)
         xp[k], pp[k] = x, p
-        i = who[k]
+        i = ev.who[k]
         if i >= 0:
             # H: h plus the sensor's offset (GPS, baro) or minus its ground height (rangefinder)
             hrow = np.zeros(n)
             hrow[0], hrow[3 + i] = 1.0, sign[i]
             if tstate[i] >= 0:
                 hrow[tstate[i]] = dtemp[k]
-            y = z[k] - hrow @ x
+            y = ev.z[k] - hrow @ x
             ph = p @ hrow
             s = hrow @ ph + r[k]
-            if y * y <= gate * gate * s:  # innovation gate
+            if y * y <= ev.gate * ev.gate * s:  # innovation gate
                 kg = ph / s
                 x = x + kg * y
                 p = p - np.outer(kg, ph)
                 gain_h[k] = abs(kg[0])
                 accepted[k] = True
                 loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
-        if still[k]:
-            # on the ground before take-off: h = 0 and v = 0 (the datum's definition)
-            for j in (0, 1):
-                s = p[j, j] + STILL_SIGMA**2
-                kg = p[:, j] / s
-                x = x - kg * x[j]
-                p = p - np.outer(kg, p[j])
+        if ev.still[k]:
+            x, p = _hold_still(x, p)
         xf[k], pf[k] = x, p
-    if not smooth:
-        return {"x": xf, "p": pf, "gain_h": gain_h, "accepted": accepted, "loglik": loglik}
-    # Rauch-Tung-Striebel: x_s(k) = x_f(k) + C (x_s(k+1) - x_p(k+1)), C = P_f F^T P_p(k+1)^-1
-    xs, ps = xf.copy(), pf.copy()
-    for k in range(count - 2, -1, -1):
-        f = _transition(t[k + 1] - t[k], n, use_bias, drifts)
-        c = np.linalg.solve(pp[k + 1].T, (pf[k] @ f.T).T).T
-        xs[k] = xf[k] + c @ (xs[k + 1] - xp[k + 1])
-        ps[k] = pf[k] + c @ (ps[k + 1] - pp[k + 1]) @ c.T
-    return {"x": xs, "p": ps, "gain_h": gain_h, "accepted": accepted, "loglik": loglik}
+    if smooth:
+        xf, pf = _rts(ev, layout, (xp, pp, xf, pf))
+    return {"x": xf, "p": pf, "gain_h": gain_h, "accepted": accepted, "loglik": loglik}
 
 
 def _drift_gain(without: dict[str, np.ndarray], with_drift: dict[str, np.ndarray]) -> float:
@@ -407,27 +461,15 @@ def _drift_record(layout: _Layout, gain: float) -> dict[str, float | int | str]:
     return {"baro_drift": verdict, "baro_drift_loglik_gain": gain}
 
 
-def _checked(
-    values: dict[str, float] | None, names: Sequence[str], option: str, unit: str
-) -> dict[str, float]:
-    """Per-sensor overrides, checked: known names, positive finite numbers."""
-    given = dict(values or {})
-    unknown = sorted(set(given) - set(names))
+def _known_names(values: Mapping[str, float], names: Sequence[str], field: str) -> None:
+    """Per-sensor overrides must name sensors of this log."""
+    unknown = sorted(set(values) - set(names))
     if unknown:
-        raise ParameterError(f"{option} names no sensor of this log: {', '.join(unknown)}")
-    if any(not (math.isfinite(v) and v > 0) for v in given.values()):
-        raise ParameterError(f"{option} values must be positive numbers ({unit})")
-    return given
+        raise InvalidParameter(field, f"names no sensor of this log: {', '.join(unknown)}")
 
 
 def _state_noise(
-    z: FloatArray,
-    t: FloatArray,
-    kinds: Sequence[str],
-    names: Sequence[str],
-    times: FloatArray,
-    speed: tuple[FloatArray, FloatArray] | None,
-    given: dict[str, float],
+    inputs: FusionInput, times: FloatArray, given: Mapping[str, float]
 ) -> tuple[FloatArray, dict[str, float]]:
     """Random-walk densities of the sensor states over each event interval (events, m), and each
     rangefinder's terrain roughness [m^2/m] by name, for the record.
@@ -437,14 +479,15 @@ def _state_noise(
     distance ``dx`` flown (``q`` by :func:`terrain_noise` against the quietest other sensor) plus
     ``Q_GROUND_STILL`` in time; without a speed, ``Q_OFFSET["rangefinder"]`` in time.
     """
+    z, t, kinds, names, speed = inputs.z, inputs.t, inputs.kinds, inputs.names, inputs.speed
     q_time = np.array([given.get(n, Q_OFFSET[k]) for n, k in zip(names, kinds, strict=True)])
     q_events = np.tile(q_time, (times.size, 1))
     terrain: dict[str, float] = {}
     ranges = [i for i, k in enumerate(kinds) if k == "rangefinder" and names[i] not in given]
-    if speed is None or speed[0].size < 2 or not ranges:
+    if speed is None or speed.t.size < 2 or not ranges:
         return q_events, terrain
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.1
-    v = (speed[0], np.clip(speed[1], 0.0, MAX_SPEED_M_S))
+    v = Samples(speed.t, np.clip(speed.value, 0.0, MAX_SPEED_M_S))
     flown_speed = _interval_mean(v, t)
     flown = np.cumsum(np.nan_to_num(flown_speed) * np.diff(t, prepend=t[0]))
     flown[np.isnan(flown_speed)] = np.nan
@@ -464,139 +507,66 @@ def _state_noise(
     return q_events, terrain
 
 
-def fuse_smoother(
-    z: FloatArray,
-    *,
-    samples: Sequence[tuple[FloatArray, FloatArray]],
-    kinds: Sequence[str],
-    names: Sequence[str],
-    t: FloatArray,
-    accel: tuple[FloatArray, FloatArray] | None = None,
-    speed: tuple[FloatArray, FloatArray] | None = None,
-    accel_noise: float | None = None,
-    sigmas: dict[str, float] | None = None,
-    gate: float = DEFAULT_GATE,
-    on_ground: tuple[float, float] | None = None,
-    temperatures: Sequence[tuple[FloatArray, FloatArray] | None] | None = None,
-    offset_noises: dict[str, float] | None = None,
-) -> FusionResult:
-    """Kalman filter + RTS smoother over the whole flight (see the module doc).
+@dataclass(frozen=True)
+class _Noise:
+    """Each event's measurement variance as ``base * scale[sensor]``: ``base`` the local noise
+    of its sensor squared, ``scale`` refined by EM except for the sensors in ``fixed``."""
 
-    Parameters
-    ----------
-    z
-        The sensors on the clock (T, n): marks the ticks where no sensor is valid, and gives the
-        noise densities of the sensors' states.
-    samples
-        Each sensor's own samples (time [s], height above take-off [m]), in ``z``'s order.
-    kinds
-        Each sensor's kind: ``gps``, ``baro`` or ``rangefinder``.
-    t
-        The clock [s] at which the result is reported.
-    accel
-        Earth-frame vertical acceleration samples (time [s], [m/s^2]) with the at-rest reading
-        removed; ``None``: the altitude-only random-walk model.
-    speed
-        Horizontal speed over ground samples (time [s], [m/s]); ``None``: unknown.
-    names
-        Each sensor's name, for ``sigmas`` and ``offset_noises``.
-    accel_noise
-        White acceleration PSD [m^2/s^3]; default: from the accelerometer's own noise
-        (:func:`accel_psd`), ``Q_ACCEL_NO_IMU`` without IMU.
-    sigmas
-        Measurement noise [m] by sensor name; the others are estimated from the log (running
-        second differences, then EM).
-    gate
-        Innovation gate [standard deviations].
-    on_ground
-        A time span [s] in which the vehicle stood at the take-off point (the datum's ground
-        window before a detected take-off): there ``h = 0`` and ``v = 0``. ``None``: unknown.
-    temperatures
-        Each sensor's temperature samples (time [s], [degC]) or None, in ``z``'s order: a
-        barometer with them gets a temperature coefficient in its model.
-    offset_noises
-        Random-walk density [m^2/s] of a sensor's offset (or a rangefinder's ground height) by
-        sensor name, in place of the defaults (see :func:`_state_noise`).
-    """
-    if not (math.isfinite(gate) and gate > 0):
-        raise ParameterError(f"--gate must be a positive number of sigmas, got {gate}")
-    if accel_noise is not None and not (math.isfinite(accel_noise) and accel_noise > 0):
-        raise ParameterError(f"--accel-noise must be positive (m^2/s^3), got {accel_noise}")
-    m = len(samples)
-    use_imu = accel is not None and accel[0].size >= 2
-    q_accel = Q_ACCEL_NO_IMU
-    if accel_noise is not None:
-        q_accel = accel_noise
-    elif use_imu and accel is not None:
-        q_accel = accel_psd(*accel)
-    given = _checked(sigmas, names, "--sigma", "metres")
-    times, who, values, position = _events(samples, t)
-    # each sample's variance: the local noise of its sensor times a scale refined by EM
+    base: FloatArray
+    scale: FloatArray
+    fixed: np.ndarray
+
+    def r(self, who: np.ndarray) -> FloatArray:
+        r: FloatArray = self.base * self.scale[np.maximum(who, 0)]
+        return r
+
+
+def _measurement_noise(
+    inputs: FusionInput, given: Mapping[str, float], who: np.ndarray, position: np.ndarray
+) -> _Noise:
+    """Each sample's variance: the local noise of its sensor (or ``given``), scale 1."""
     local = [
-        np.full(s[1].size, given[name]) if name in given else local_sigma(*s)
-        for name, s in zip(names, samples, strict=True)
+        np.full(s.value.size, given[name]) if name in given else local_sigma(*s)
+        for name, s in zip(inputs.names, inputs.samples, strict=True)
     ]
-    base = np.ones(times.size)
-    for i in range(m):
+    base = np.ones(who.size)
+    for i in range(len(inputs.samples)):
         mine = who == i
         base[mine] = local[i][position[mine]] ** 2
-    scale = np.ones(m)
-    fixed = np.array([name in given for name in names])
-    still = np.zeros(times.size, dtype=bool)
-    if on_ground is not None:
-        still = (who == -1) & (times >= on_ground[0]) & (times <= on_ground[1])
-    a = np.zeros(times.size)
-    if use_imu and accel is not None:
-        a = np.nan_to_num(_interval_mean(accel, times))
-    first = [s[1][0] for s in samples if s[1].size]
-    h0 = float(np.median(first)) if first else 0.0
-    tstate, dtemp = _thermal(temperatures, samples, who, position, m)
-    sign = np.array([-1.0 if k == "rangefinder" else 1.0 for k in kinds])
-    layout = _Layout(sign, tstate, dtemp, np.full(m, -1))
-    q_given = _checked(offset_noises, names, "--offset-noise", "m^2/s")
-    q_events, terrain = _state_noise(z, t, kinds, names, times, speed, q_given)
-    sensor_of = np.maximum(who, 0)
+    fixed = np.array([name in given for name in inputs.names])
+    return _Noise(base, np.ones(len(inputs.samples)), fixed)
 
-    def run(layout: _Layout, smooth: bool = True) -> dict[str, np.ndarray]:
-        r = base * scale[sensor_of]
-        return _run(
-            times, who, values, a, r, q_accel, q_events, use_imu, gate, h0, still, layout, smooth
+
+def _em_scale(ev: _Events, layout: _Layout, noise: _Noise, out: dict[str, np.ndarray]) -> None:
+    """EM, M-step: each sensor's noise scale from the smoothed residuals (in place)."""
+    xs, ps = out["x"], out["p"]
+    tstate, sign, dtemp = layout.thermal, layout.sign, layout.dtemp
+    for i in range(sign.size):
+        mine = (ev.who == i) & out["accepted"]
+        if noise.fixed[i] or not mine.any():
+            continue
+        # the measurement model's rows at these events: coefficients on (h, c_i, k_i)
+        cols = [0, 3 + i] + ([int(tstate[i])] if tstate[i] >= 0 else [])
+        coef = np.column_stack(
+            [np.ones(mine.sum()), np.full(mine.sum(), sign[i])]
+            + ([dtemp[mine]] if tstate[i] >= 0 else [])
         )
+        resid = ev.z[mine] - np.einsum("ka,ka->k", coef, xs[mine][:, cols])
+        var_h = np.einsum("ka,kab,kb->k", coef, ps[mine][:, cols][:, :, cols], coef)
+        noise.scale[i] = max(float(np.mean((resid**2 + var_h) / noise.base[mine])), 1e-4)
 
-    # a barometer that drifts: its offset gets a drift rate if the log's evidence asks for it
-    drift_gain = math.nan
-    if "baro" in kinds:
-        drifting = layout.with_drift(kinds)
-        drift_gain = _drift_gain(run(layout, False), run(drifting, False))
-        if drift_gain > DRIFT_GAIN:
-            layout = drifting
-    for npass in range(EM_PASSES + 1):
-        out = run(layout)
-        if npass == EM_PASSES:
-            break
-        # EM, M-step: each sensor's noise scale from the smoothed residuals
-        xs, ps = out["x"], out["p"]
-        for i in range(m):
-            mine = (who == i) & out["accepted"]
-            if fixed[i] or not mine.any():
-                continue
-            # the measurement model's rows at these events: coefficients on (h, c_i, k_i)
-            cols = [0, 3 + i] + ([int(tstate[i])] if tstate[i] >= 0 else [])
-            coef = np.column_stack(
-                [np.ones(mine.sum()), np.full(mine.sum(), sign[i])]
-                + ([dtemp[mine]] if tstate[i] >= 0 else [])
-            )
-            resid = values[mine] - np.einsum("ka,ka->k", coef, xs[mine][:, cols])
-            var_h = np.einsum("ka,kab,kb->k", coef, ps[mine][:, cols][:, :, cols], coef)
-            scale[i] = max(float(np.mean((resid**2 + var_h) / base[mine])), 1e-4)
 
+def _contributions(
+    who: np.ndarray, gain_h: FloatArray, z: FloatArray
+) -> tuple[FloatArray, np.ndarray]:
+    """Each sensor's share per tick of the gain on h its samples carried since the previous tick
+    (summing to 1 over the sensors present at the tick), and which ticks have a sensor."""
+    m = z.shape[1]
     tick = who == -1
-    xs, ps = out["x"][tick], out["p"][tick]
-    # contributions: each sensor's share of the gain on h carried since the previous tick
     idx_tick = np.flatnonzero(tick)
-    cum = np.zeros((times.size + 1, m))
+    cum = np.zeros((who.size + 1, m))
     for i in range(m):
-        cum[1:, i] = np.cumsum(np.where(who == i, out["gain_h"], 0.0))
+        cum[1:, i] = np.cumsum(np.where(who == i, gain_h, 0.0))
     bounds = np.concatenate(([0], idx_tick[:-1] + 1))
     share = cum[idx_tick + 1] - cum[bounds]
     valid = np.asarray(np.isfinite(z).any(axis=1))
@@ -604,7 +574,7 @@ def fuse_smoother(
     with np.errstate(invalid="ignore", divide="ignore"):
         weights = np.where(total > 0, share / total, np.nan)
     # a tick with no update since the previous one keeps the previous contributions
-    for k in range(1, t.size):
+    for k in range(1, z.shape[0]):
         if not np.isfinite(weights[k]).all():
             weights[k] = weights[k - 1]
     # a sensor absent from the clock at a tick (a gap longer than --max-gap) gets no weight there,
@@ -615,18 +585,70 @@ def fuse_smoother(
     even = present / np.maximum(present.sum(axis=1, keepdims=True), 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         weights = np.where(total > 0, weights / total, even)
-    weights = np.where(valid[:, None], weights, np.nan)
-    fused = np.where(valid, xs[:, 0], np.nan)
-    rejected = {
-        f"rejected_{name}": int(((who == i) & ~out["accepted"]).sum())
-        for i, name in enumerate(names)
-    }
-    n_valid = np.isfinite(z).sum(axis=1)
+    return np.asarray(np.where(valid[:, None], weights, np.nan)), valid
+
+
+def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
+    """Kalman filter + RTS smoother over the whole flight (see the module doc).
+
+    From ``inputs``: each sensor's own referred ``samples`` (fused at their own times), its
+    ``kinds`` and ``names``; ``z`` on the clock marks the ticks where no sensor is valid and gives
+    the noise densities of the sensors' states; the clock ``t`` at which the result is reported;
+    ``accel`` (None: the altitude-only random-walk model), ``speed``, ``temperatures`` (a
+    barometer with them gets a temperature coefficient) and ``on_ground_s`` (there ``h = 0`` and
+    ``v = 0``) when the log has them.
+    """
+    names, kinds, samples = inputs.names, inputs.kinds, inputs.samples
+    _known_names(params.sigma_m, names, "sigma_m")
+    _known_names(params.offset_noise_m2_s, names, "offset_noise_m2_s")
+    m = len(samples)
+    accel = None if inputs.accel is None else inputs.accel.samples
+    use_imu = accel is not None and accel.t.size >= 2
+    q_accel = Q_ACCEL_NO_IMU
+    if params.accel_noise_m2_s3 is not None:
+        q_accel = params.accel_noise_m2_s3
+    elif use_imu and accel is not None:
+        q_accel = accel_psd(*accel)
+    times, who, values, position = _merge_events(samples, inputs.t)
+    # each sample's variance: the local noise of its sensor times a scale refined by EM
+    noise = _measurement_noise(inputs, params.sigma_m, who, position)
+    still = np.zeros(times.size, dtype=bool)
+    if inputs.on_ground_s is not None:
+        lo, hi = inputs.on_ground_s
+        still = (who == -1) & (times >= lo) & (times <= hi)
+    a = np.zeros(times.size)
+    if use_imu and accel is not None:
+        a = np.nan_to_num(_interval_mean(accel, times))
+    first = [s.value[0] for s in samples if s.value.size]
+    h0 = float(np.median(first)) if first else 0.0
+    tstate, dtemp = _thermal(inputs.temperatures, samples, who, position, m)
+    sign = np.array([-1.0 if k == "rangefinder" else 1.0 for k in kinds])
+    layout = _Layout(sign, tstate, dtemp, np.full(m, -1))
+    q_events, terrain = _state_noise(inputs, times, params.offset_noise_m2_s)
+    ev = _Events(times, who, values, a, q_events, still, q_accel, use_imu, params.gate_sigma, h0)
+    # a barometer that drifts: its offset gets a drift rate if the log's evidence asks for it
+    drift_gain = math.nan
+    if "baro" in kinds:
+        drifting = layout.with_drift(kinds)
+        drift_gain = _drift_gain(
+            _run(ev, noise.r(who), layout, False), _run(ev, noise.r(who), drifting, False)
+        )
+        if drift_gain > DRIFT_GAIN:
+            layout = drifting
+    for npass in range(EM_PASSES + 1):
+        out = _run(ev, noise.r(who), layout)
+        if npass == EM_PASSES:
+            break
+        _em_scale(ev, layout, noise, out)
+
+    tick = who == -1
+    xs, ps = out["x"][tick], out["p"][tick]
+    weights, valid = _contributions(who, out["gain_h"], inputs.z)
+    n_valid = np.isfinite(inputs.z).sum(axis=1)
     status = np.where(n_valid == 1, SINGLE, np.where(valid, FUSED, NONE))
-    sensor_q = np.median(q_events, axis=0)
     return FusionResult(
         method="smoother",
-        fused=fused,
+        fused=np.where(valid, xs[:, 0], np.nan),
         weights=weights,
         status=status,
         traces={"offset": xs[:, 3 : 3 + m]},
@@ -638,20 +660,36 @@ def fuse_smoother(
         params={
             "model": "accelerometer-driven" if use_imu else "altitude-only random walk (no IMU)",
             "accel_noise_m2_s3": q_accel,
-            "gate_sigma": gate,
+            "gate_sigma": params.gate_sigma,
             **_drift_record(layout, drift_gain),
-            **{
-                f"sigma_{name}_m": float(np.median(np.sqrt(base[who == i] * scale[i])))
-                for i, name in enumerate(names)
-                if (who == i).any()
-            },
-            **{f"q_offset_{name}_m2_s": float(sensor_q[i]) for i, name in enumerate(names)},
-            **{
-                f"thermal_{name}_m_per_degC": float(xs[-1, tstate[i]])
-                for i, name in enumerate(names)
-                if tstate[i] >= 0
-            },
+            **_fitted(names, ev, noise, layout, xs[-1]),
             **{f"q_terrain_{name}_m2_m": value for name, value in terrain.items()},
-            **rejected,
+            **{
+                f"rejected_{name}": int(((who == i) & ~out["accepted"]).sum())
+                for i, name in enumerate(names)
+            },
         },
     )
+
+
+def _fitted(
+    names: Sequence[str], ev: _Events, noise: _Noise, layout: _Layout, last: FloatArray
+) -> dict[str, float]:
+    """What the smoother learnt of each sensor, for the record: its noise (the median over its
+    samples), its offset's random walk (the median over the flight) and a barometer's
+    temperature coefficient."""
+    sensor_q = np.median(ev.q_state, axis=0)
+    who, tstate = ev.who, layout.thermal
+    return {
+        **{
+            f"sigma_{name}_m": float(np.median(np.sqrt(noise.base[who == i] * noise.scale[i])))
+            for i, name in enumerate(names)
+            if (who == i).any()
+        },
+        **{f"q_offset_{name}_m2_s": float(sensor_q[i]) for i, name in enumerate(names)},
+        **{
+            f"thermal_{name}_m_per_degC": float(last[tstate[i]])
+            for i, name in enumerate(names)
+            if tstate[i] >= 0
+        },
+    }

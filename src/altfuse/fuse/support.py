@@ -28,6 +28,8 @@ Eq. 4 divides by ``n``, not ``n - 1``, as the paper does. The paper gives no val
   spread of all pairwise differences, ``s = median|z_i - z_j| / 0.6745`` (the standard deviation
   for Gaussian differences), floored at 1 cm. Two sensors that differ by ``s`` then support each
   other with ``exp(-1/2) = 0.61``, by ``3 s`` with 0.011. A fixed ``alpha`` can be given instead.
+- ``k`` comes from a window in seconds, ``k = round(window_s / dt)``, so that a faster clock
+  keeps the window's length rather than its tick count.
 - Defaults ``beta = 10``, ``k = 5`` (0.5 s at 10 Hz) and the data-driven ``alpha`` were chosen by
   measurement (``benchmarks/tune_support.py``): on the synthetic Paper A experiment (10 seeds)
   they gave the lowest whole-flight RMSE of the grid alpha x {1/4, 1, 4}, beta {0, 1, 10, 100},
@@ -38,19 +40,39 @@ Eq. 4 divides by ``n``, not ``n - 1``, as the paper does. The paper gives no val
 
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from altfuse.errors import ParameterError
-from altfuse.fuse.base import FusionResult, combine
+from altfuse.fuse.base import FusionInput, FusionResult, combine
 from altfuse.model import FloatArray
+from altfuse.params import Params, param
 
-DEFAULT_BETA = 10.0
-DEFAULT_WINDOW = 5
 #: Gaussian consistency constant: median(|x|) = 0.6745 sigma for x ~ N(0, sigma²).
 _MAD_TO_SIGMA = 0.6745
 _MIN_SPREAD_M = 0.01
+
+
+@dataclass(frozen=True, kw_only=True)
+class SupportParams(Params):
+    """Paper A's parameters (Eq. 2, 5, 6-7)."""
+
+    alpha_per_m2: float | None = param(
+        None,
+        help="support kernel scale alpha (Eq. 2)",
+        unit="1/m^2",
+        check="positive",
+        default_text="from the data",
+    )
+    beta: float = param(
+        10.0, help="penalty on the support's variance (Eq. 5)", check="non-negative"
+    )
+    window_s: float = param(
+        0.5,
+        help="the window of Eq. 6-7, k = window / tick previous ticks",
+        unit="s",
+        check="non-negative",
+    )
 
 
 def auto_alpha(z: FloatArray) -> float:
@@ -98,35 +120,18 @@ def window_mean_var(r: FloatArray, k: int) -> tuple[FloatArray, FloatArray]:
     return rbar, sigma2
 
 
-def fuse_support(
-    z: FloatArray,
-    *,
-    alpha: float | None = None,
-    beta: float = DEFAULT_BETA,
-    window: int = DEFAULT_WINDOW,
-) -> FusionResult:
-    """Paper A's observation-support dynamic weighting (Eq. 2-8), see the module doc.
+def fuse_support(inputs: FusionInput, params: SupportParams) -> FusionResult:
+    """Paper A's observation-support dynamic weighting (Eq. 2-8) of ``inputs.z`` [m], see the
+    module doc.
 
-    Parameters
-    ----------
-    z
-        Heights [m] of ``n`` sensors on one clock, shape (T, n); NaN where a sensor is absent.
-    alpha
-        Support kernel scale [1/m²]; ``None`` chooses it from the data (:func:`auto_alpha`).
-    beta
-        Penalty on the variance of the support (Eq. 5), >= 0.
-    window
-        ``k``: the window holds the current and the ``k`` previous ticks (Eq. 6, 7), >= 0.
+    ``params.alpha_per_m2`` None chooses ``alpha`` from the data (:func:`auto_alpha`); the window
+    holds the current and the ``k = round(window_s / dt_s)`` previous ticks (Eq. 6, 7).
     """
-    if alpha is not None and not (math.isfinite(alpha) and alpha > 0):
-        raise ParameterError(f"--alpha must be a positive number (1/m^2), got {alpha}")
-    if not (math.isfinite(beta) and beta >= 0):
-        raise ParameterError(f"--beta must be a number >= 0, got {beta}")
-    if window < 0:
-        raise ParameterError(f"--window must be a whole number >= 0, got {window}")
-    alpha_used = auto_alpha(z) if alpha is None else float(alpha)
+    z, alpha, beta = inputs.z, params.alpha_per_m2, params.beta
+    k = round(params.window_s / inputs.dt_s)
+    alpha_used = auto_alpha(z) if alpha is None else alpha
     r = pairwise_support(z, alpha_used)
-    rbar, sigma2 = window_mean_var(r, window)
+    rbar, sigma2 = window_mean_var(r, k)
     # Eq. 5, clipped at 0 (the paper leaves beta * sigma2 > 1 open)
     lam = np.clip(rbar * (1.0 - beta * sigma2), 0.0, None)
     lam = np.where(np.isfinite(lam), lam, 0.0)
@@ -137,9 +142,10 @@ def fuse_support(
         "support",
         traces={"lambda": lam, "support": r, "support_mean": rbar, "support_var": sigma2},
         params={
-            "alpha": alpha_used,
+            "alpha_per_m2": alpha_used,
             "alpha_source": "data (robust pairwise spread)" if alpha is None else "option",
-            "beta": float(beta),
-            "window": int(window),
+            "beta": beta,
+            "window_s": params.window_s,
+            "window_ticks": k,
         },
     )

@@ -6,11 +6,9 @@ import hashlib
 from pathlib import Path
 
 from altfuse.errors import LogReadError
+from altfuse.io.framing import FMT_HEADER
 from altfuse.model import FlightLog
-from altfuse.screen import screen
 
-#: Every DataFlash record starts with these two bytes; the first records are FMT (type 0x80).
-DATAFLASH_FMT_HEADER = b"\xa3\x95\x80"
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 _SNIFF_BYTES = 4096
 
@@ -26,7 +24,8 @@ def sha256_of(path: Path) -> str:
 def read_log(path: str | Path) -> FlightLog:
     """Read a flight log, choosing the reader by the file's first bytes, not its name.
 
-    The sources are screened for impossible samples (:mod:`altfuse.screen`).
+    The log comes as it is written: screening impossible samples (:func:`altfuse.screen.screen`)
+    is the pipeline's first stage.
 
     Raises
     ------
@@ -49,8 +48,8 @@ def read_log(path: str | Path) -> FlightLog:
         raise LogReadError(
             f"{path}: a PX4 ULog file; altfuse reads ArduPilot DataFlash (.bin) logs"
         )
-    if DATAFLASH_FMT_HEADER not in head:
+    if FMT_HEADER not in head:
         raise LogReadError(f"{path}: not a DataFlash log (no FMT record in its first bytes)")
     from altfuse.io.dataflash import read_dataflash
 
-    return screen(read_dataflash(path))
+    return read_dataflash(path)

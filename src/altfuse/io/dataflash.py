@@ -43,7 +43,7 @@ from pymavlink.DFReader import FORMAT_TO_STRUCT
 from altfuse.errors import LogReadError
 from altfuse.io import sha256_of
 from altfuse.io.fastdf import Index, _text, index_file
-from altfuse.model import Attitude, FlightLog, FloatArray, Imu, Series
+from altfuse.model import Attitude, FlightLog, FloatArray, Imu, SensorKind, Series
 
 log = logging.getLogger(__name__)
 
@@ -204,11 +204,11 @@ class _Builder:
         self.notes: list[str] = []
         self.temperatures: dict[str, Series] = {}
 
-    def add(
+    def add(  # noqa: PLR0913 (keyword-only: what one source is, by name)
         self,
         *,
         name: str,
-        kind: str,
+        kind: SensorKind,
         type_name: str,
         col: str,
         datum: str,
@@ -250,9 +250,9 @@ class _Builder:
         )
 
 
-def _add_instances(
+def _add_instances(  # noqa: PLR0913 (what each instance's source is, as add() takes it)
     b: _Builder,
-    kind: str,
+    kind: SensorKind,
     type_name: str,
     col: str,
     datum: str,

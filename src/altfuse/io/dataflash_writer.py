@@ -14,10 +14,7 @@ from typing import BinaryIO
 
 from pymavlink.DFReader import FORMAT_TO_STRUCT
 
-HEADER = b"\xa3\x95"
-FMT_TYPE = 0x80
-FMT_FORMAT = "BBnNZ"
-FMT_COLUMNS = "Type,Length,Name,Format,Columns"
+from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_TYPE, HEADER, SYNC
 
 #: Unit and multiplier ids as ArduPilot defines them (a subset).
 UNITS = {
@@ -84,7 +81,7 @@ class DataFlashWriter:
     def _declare(self, name: str, type_id: int, fmt: str, columns: str) -> None:
         packer = _struct(fmt)
         self._types[name] = (type_id, fmt, packer)
-        length = len(HEADER) + 1 + packer.size
+        length = HEADER + packer.size
         self.write("FMT", type_id, length, name, fmt, columns)
 
     def define(
@@ -102,5 +99,5 @@ class DataFlashWriter:
     def write(self, name: str, *values: object) -> None:
         """Write one record of type ``name``; scaled fields take their value in the real unit."""
         type_id, fmt, packer = self._types[name]
-        self.stream.write(HEADER + bytes([type_id]) + packer.pack(*_encode(fmt, values)))
+        self.stream.write(SYNC + bytes([type_id]) + packer.pack(*_encode(fmt, values)))
         self.records += 1

@@ -32,10 +32,9 @@ import numpy.typing as npt
 from numpy.lib.stride_tricks import as_strided
 from pymavlink.DFReader import FORMAT_TO_STRUCT
 
-HEAD1, HEAD2 = 0xA3, 0x95
-FMT_TYPE = 0x80
-FMT_LENGTH = 89
-HEADER = 3
+from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_LENGTH, FMT_TYPE, HEADER, SYNC
+
+HEAD1, HEAD2 = SYNC
 _CHUNK = 1 << 24  # header search in 16 MiB chunks: bounded temporaries
 _MAX_PRUNE_ROUNDS = 10_000
 
@@ -139,14 +138,10 @@ def _formats(
     data: npt.NDArray[np.uint8], at: npt.NDArray[np.integer[Any]]
 ) -> tuple[dict[int, Format], dict[int, int]]:
     """The well-formed FMT records at ``at``: formats by type id, and where each was defined."""
-    fmt_dtype = Format.build(
-        FMT_TYPE, "FMT", FMT_LENGTH, "BBnNZ", "Type,Length,Name,Format,Columns"
-    ).dtype
+    fmt_dtype = Format.build(FMT_TYPE, "FMT", FMT_LENGTH, FMT_FORMAT, FMT_COLUMNS).dtype
     at = at[at + FMT_LENGTH <= data.size]
     formats: dict[int, Format] = {
-        FMT_TYPE: Format.build(
-            FMT_TYPE, "FMT", FMT_LENGTH, "BBnNZ", "Type,Length,Name,Format,Columns"
-        )
+        FMT_TYPE: Format.build(FMT_TYPE, "FMT", FMT_LENGTH, FMT_FORMAT, FMT_COLUMNS)
     }
     first: dict[int, int] = {FMT_TYPE: -1}
     if at.size == 0:

@@ -14,27 +14,30 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 import pandas as pd
 
 from altfuse.datum import Referred
-from altfuse.errors import AltfuseError, NoUsableSensorsError, ParameterError
-from altfuse.fuse import FUSERS
+from altfuse.errors import AltfuseError, NoUsableSensorsError
+from altfuse.fuse import METHODS, method
 from altfuse.io import read_log
 from altfuse.metrics import ErrorStats, error_stats
 from altfuse.model import FlightLog, FloatArray, Series
+from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions, FuseRun, Prepared, prepare, run_method
 
-TRUTHS = ("auto", "sim", "ekf")
+#: What to measure against: the simulator's truth, the EKF's estimate, or the first of them.
+TruthChoice = Literal["auto", "sim", "ekf"]
+TRUTHS: tuple[TruthChoice, ...] = get_args(TruthChoice)
 
 
 @dataclass(frozen=True)
 class Truth:
     """The series every estimate is measured against, on the clock and referred to take-off."""
 
-    name: str  # "sim" or "ekf"
+    name: Literal["sim", "ekf"]
     is_reference: bool  # True: an estimate standing in for the truth
     source: str
     h: FloatArray
@@ -50,7 +53,7 @@ class Row:
     """One estimate's errors, overall and per segment."""
 
     name: str
-    kind: str  # "method", "sensor" or "onboard"
+    kind: Literal["method", "sensor", "onboard"]
     estimate: FloatArray
     overall: ErrorStats
     segments: dict[str, ErrorStats] = field(default_factory=dict)
@@ -109,13 +112,16 @@ def _on_clock(series: Series, referred: Referred) -> FloatArray:
     return np.asarray(h - np.median(h[ground]))
 
 
-def choose_truth(flight: FlightLog, referred: Referred, which: str = "auto") -> Truth:
+def choose_truth(flight: FlightLog, referred: Referred, which: TruthChoice = "auto") -> Truth:
     """The simulator's truth, else the EKF as a reference (``which``: auto, sim or ekf)."""
     if which not in TRUTHS:
-        raise ParameterError(f"--truth must be one of {', '.join(TRUTHS)}, got {which!r}")
+        raise InvalidParameter("truth", f"must be one of {', '.join(TRUTHS)}, got {which!r}")
     refs = {r.name: r for r in flight.references}
     name = Path(flight.path).name
-    for candidate, kind in (("sim", "sim"), ("ekf", "ekf"), ("ctun", "ekf")):
+    candidates: tuple[tuple[str, Literal["sim", "ekf"]], ...] = (
+        ("sim", "sim"), ("ekf", "ekf"), ("ctun", "ekf"),
+    )  # fmt: skip
+    for candidate, kind in candidates:
         if which in ("auto", kind) and candidate in refs:
             series = refs[candidate]
             return Truth(kind, kind == "ekf", series.source, _on_clock(series, referred))
@@ -141,11 +147,11 @@ def parse_segments(spec: str | None, t: FloatArray) -> dict[str, tuple[float, fl
     try:
         values = [float(v) for v in spec.split(",") if v.strip()]
     except ValueError as exc:
-        raise ParameterError(f"--segments takes seconds or boundaries, got {spec!r}") from exc
+        raise InvalidParameter("segments", f"takes seconds or boundaries, got {spec!r}") from exc
     start, end = float(t[0]), float(t[-1])
     if len(values) == 1 and "," not in spec:
         if not values[0] > 0:
-            raise ParameterError(f"--segments length must be positive, got {values[0]}")
+            raise InvalidParameter("segments", f"length must be positive, got {values[0]}")
         edges = [*np.arange(start, end, values[0]).tolist(), end]
     else:
         edges = [start, *sorted(v for v in values if start < v < end), end]
@@ -156,7 +162,7 @@ def parse_segments(spec: str | None, t: FloatArray) -> dict[str, tuple[float, fl
 
 def _row(
     name: str,
-    kind: str,
+    kind: Literal["method", "sensor", "onboard"],
     estimate: FloatArray,
     truth: FloatArray,
     t: FloatArray,
@@ -173,15 +179,15 @@ def evaluate(
     path: str | Path,
     methods: Sequence[str] | None = None,
     options: FuseOptions | None = None,
-    truth: str = "auto",
+    truth: TruthChoice = "auto",
     segments: str | None = None,
 ) -> Evaluation:
-    """Run every method on the log at ``path`` and measure it, each sensor and the EKF.
+    """Run every method (or those named) on the log at ``path``, each with its parameters in
+    ``options.params`` or its defaults, and measure it, each sensor and the EKF.
 
     A method that cannot run on the log (``multilayer`` without IMU) is listed in ``failed``.
     """
     options = options or FuseOptions()
-    options.check()
     return evaluate_prepared(prepare(read_log(path), options), methods, options, truth, segments)
 
 
@@ -189,33 +195,34 @@ def evaluate_prepared(
     prepared: Prepared,
     methods: Sequence[str] | None = None,
     options: FuseOptions | None = None,
-    truth: str = "auto",
+    truth: TruthChoice = "auto",
     segments: str | None = None,
-    done: dict[str, FuseRun] | None = None,
+    done: Sequence[FuseRun] = (),
 ) -> Evaluation:
     """:func:`evaluate` on sources already prepared (read, aligned, referred).
 
-    ``done``: runs already made with these options and no method parameters, reused as they are.
+    ``done``: runs already made on ``prepared``, each reused for its method where its options
+    are those the evaluation would run it with.
     """
     options = options or FuseOptions()
-    methods = list(methods or FUSERS)
-    unknown = [m for m in methods if m not in FUSERS]
-    if unknown:
-        raise ParameterError(f"unknown method {unknown[0]!r}; choose from {', '.join(FUSERS)}")
+    methods = list(methods or METHODS)
+    for name in methods:
+        method(name)
     reference = choose_truth(prepared.log, prepared.referred, truth)
     t = prepared.referred.t
     spans = parse_segments(segments, t)
     rows, runs, failed = [], {}, {}
-    for method in methods:
+    for name in methods:
+        wanted = replace(options, method=name)
         try:
-            run = (done or {}).get(method) or run_method(
-                prepared, replace(options, method=method, params={})
+            run = next((r for r in done if r.options == wanted), None) or run_method(
+                prepared, wanted
             )
         except AltfuseError as exc:
-            failed[method] = str(exc)
+            failed[name] = str(exc)
             continue
-        runs[method] = run
-        rows.append(_row(method, "method", run.result.fused, reference.h, t, spans))
+        runs[name] = run
+        rows.append(_row(name, "method", run.result.fused, reference.h, t, spans))
     for i, name in enumerate(prepared.referred.names):
         rows.append(_row(name, "sensor", prepared.referred.h[:, i], reference.h, t, spans))
     ekf = next((r for r in prepared.log.references if r.name == "ekf"), None)

@@ -3,8 +3,8 @@
 A flight (scenario, seed, faults) is simulated, written as a DataFlash log, read back and fused
 by every method as ``altfuse fuse`` would; each method's RMSE [m] is against the SIM truth,
 referred to take-off as ``altfuse evaluate`` does. For the smoother also how many ticks' true
-errors lie within its +-2 ``fused_std``. Used by ``benchmarks/smoother_accuracy.py`` and the
-tests.
+errors lie within its +-2 ``fused_std``. Used by ``tests/test_smoother_accuracy.py`` and
+``benchmarks/smoother_accuracy.py``: a measurement, not part of the package.
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from altfuse.evaluate import choose_truth
-from altfuse.fuse import FUSERS
+from altfuse.evaluation import choose_truth
+from altfuse.fuse import METHODS
 from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, prepare, run_method
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
@@ -45,7 +45,7 @@ def measure(flight: Flight) -> dict[str, float]:
         prepared = prepare(read_log(path), FuseOptions())
     truth = choose_truth(prepared.log, prepared.referred).h
     row: dict[str, float] = {}
-    for method in FUSERS:
+    for method in METHODS:
         result = run_method(prepared, FuseOptions(method=method)).result
         error = result.fused - truth
         ok = np.isfinite(error)
@@ -59,7 +59,7 @@ def measure(flight: Flight) -> dict[str, float]:
 
 def best_other(row: dict[str, float]) -> str:
     """The method other than the smoother with the lowest RMSE in a :func:`measure` row."""
-    return min((m for m in FUSERS if m != "smoother"), key=lambda m: row[m])
+    return min((m for m in METHODS if m != "smoother"), key=lambda m: row[m])
 
 
 def label(flight: Flight) -> str:

@@ -1,0 +1,131 @@
+"""The jobs as library calls: a log to a table (:func:`fuse_file`), a log to its files
+(:func:`fuse_to_files`, what ``altfuse fuse`` and each log of ``altfuse batch`` run)."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from altfuse.errors import ParameterError
+from altfuse.evaluation import Evaluation, evaluate_prepared, truth_or_none
+from altfuse.fuse import params_for
+from altfuse.io import read_log
+from altfuse.params import fields
+from altfuse.pipeline import FuseOptions, FuseRun, fuse_log, prepare, run_method
+from altfuse.plot import check_plot_path, run_figure, writer
+from altfuse.write import Writer, default_meta_path, fused_table, write_json, write_outputs
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """Where one run's files go: the fused CSV, its provenance sidecar (default: beside the CSV
+    as ``NAME.meta.json``) and, where given, the weight traces, the figure (``.png`` or
+    ``.svg``) and the evaluation report (JSON)."""
+
+    csv: Path
+    meta: Path | None = None
+    weights: Path | None = None
+    plot: Path | None = None
+    evaluation: Path | None = None
+
+    def __post_init__(self) -> None:
+        if self.plot is not None:
+            check_plot_path(self.plot)
+
+    @property
+    def meta_path(self) -> Path:
+        return self.meta or default_meta_path(self.csv)
+
+    def paths(self) -> list[Path]:
+        """Every file this run writes."""
+        optional = (self.weights, self.plot, self.evaluation)
+        return [self.csv, self.meta_path, *(p for p in optional if p is not None)]
+
+    def refuse(self, log_path: Path, force: bool = False) -> None:
+        """Refuse outputs that would overwrite the input log, or existing files unless
+        ``force``."""
+        for target in self.paths():
+            if log_path.exists() and target.resolve() == log_path.resolve():
+                raise ParameterError(f"{target} is the input log; choose another output path")
+            if not force and target.exists():
+                raise ParameterError(f"{target} exists; --force overwrites it")
+
+
+@dataclass(frozen=True)
+class FileRun:
+    """A run written to files: the run, its evaluation (when asked for) and the files by
+    role (``csv``, ``meta``, ``weights``, ``png``/``svg``, ``json``)."""
+
+    run: FuseRun
+    evaluation: Evaluation | None
+    written: dict[str, str]
+
+
+def fuse_to_files(
+    path: str | Path,
+    outputs: Outputs,
+    options: FuseOptions | None = None,
+    label: str | None = None,
+) -> FileRun:
+    """Read, fuse and write one log: the CSV, the sidecar and the optional files, all or none.
+
+    ``label`` names the log in the figure's title (default: its file name). With
+    ``outputs.evaluation``, every method is evaluated too (the run made here is reused for its
+    own method).
+    """
+    options = options or FuseOptions()
+    started = time.perf_counter()
+    flight = read_log(path)
+    log.info("%s: read %d bytes in %.2f s", Path(path).name, flight.size_bytes,
+             time.perf_counter() - started)  # fmt: skip
+    prepared = prepare(flight, options)
+    run = run_method(prepared, options)
+    extra: dict[Path, tuple[Writer, bool]] = {}
+    evaluation = None
+    if outputs.evaluation is not None:
+        evaluation = evaluate_prepared(prepared, options=options, done=[run])
+        extra[outputs.evaluation] = (write_json(evaluation.as_dict()), False)
+    if outputs.plot is not None:
+        truth = evaluation.truth if evaluation else truth_or_none(run.log, run.referred)
+        title = f"{label or Path(path).name}: {options.method}"
+        fig = run_figure(run, {options.method: run.result.fused}, truth, title)
+        extra[outputs.plot] = (writer(fig, outputs.plot), True)
+    started = time.perf_counter()
+    written = write_outputs(run, outputs.csv, outputs.weights, outputs.meta, extra)
+    log.info("wrote the outputs in %.2f s", time.perf_counter() - started)
+    return FileRun(run, evaluation, written)
+
+
+def fuse_file(
+    path: str | Path, method: str = "support", *, time_index: bool = False, **values: Any
+) -> pd.DataFrame:
+    """The fused table of the log at ``path``, as ``altfuse fuse`` writes it to CSV.
+
+    ``values`` are the pipeline's options (:class:`FuseOptions`: ``rate_hz``, ``max_gap_s``, ...)
+    and the method's parameters (``alpha_per_m2`` for ``support``, ...), by name. Columns:
+    ``time_s`` [s since boot], ``alt_<sensor>_m``, ``fused_alt_m``, ``status``, ``weight_<sensor>``
+    and the method's own (see :func:`altfuse.write.fused_table`). With ``time_index`` the rows
+    are also indexed by that time as a ``TimedeltaIndex`` named ``time``, for pandas' resampling
+    and time-based selection.
+    """
+    import pandas as pd
+
+    pipeline = {f.name for f in fields(FuseOptions)}
+    params = params_for(method, {k: v for k, v in values.items() if k not in pipeline})
+    options = FuseOptions(
+        method=method,
+        params={method: params},
+        **{k: v for k, v in values.items() if k in pipeline},
+    )
+    table = fused_table(fuse_log(path, options))
+    if time_index:
+        table.index = pd.TimedeltaIndex(pd.to_timedelta(table["time_s"], unit="s"), name="time")
+    return table

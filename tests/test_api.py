@@ -1,0 +1,71 @@
+"""The public face: ``import altfuse``, the README's Python example, the library job."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import altfuse
+from altfuse.params import InvalidParameter
+from conftest import ROOT, SAMPLE_LOG
+
+
+def readme_python_examples() -> list[str]:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text.split("\n## Python\n", 1)[1].split("\n## ", 1)[0]
+    return re.findall(r"```python\n(.*?)```", section, flags=re.DOTALL)
+
+
+def test_the_readme_python_example_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(ROOT)
+    example = readme_python_examples()[0]
+    assert example.count("\n") == 4  # import, blank, three lines at most of code
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        exec(compile(example, "README.md", "exec"), {})
+    lines = printed.getvalue().splitlines()
+    assert lines[0].split() == ["time_s", "fused_alt_m", "status"]
+    assert len(lines) == 4
+    # the last ticks of the sample flight: time, a height near the ground, a status
+    _, time_s, height, status = lines[-1].split()
+    assert float(time_s) == pytest.approx(149.9)
+    assert abs(float(height)) < 1.0
+    assert status in {"fused", "single"}
+
+
+def test_import_altfuse_names_its_public_face_without_loading_numpy() -> None:
+    code = "import sys, altfuse; print(altfuse.__all__); print('numpy' in sys.modules)"
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.splitlines()
+    names = eval(out[0])  # a list literal
+    for name in ("read_log", "fuse_log", "fuse_file", "evaluate", "FuseOptions", "METHODS"):
+        assert name in names
+    assert out[1] == "False"
+    assert sorted(names) == sorted(["__version__", *altfuse._PUBLIC])
+    for name in names:
+        assert getattr(altfuse, name) is not None
+    assert callable(altfuse.evaluate)  # the function, not the module altfuse.evaluation
+
+
+def test_fuse_file_is_the_csv_table_with_the_options_and_parameters_routed() -> None:
+    table = altfuse.fuse_file(SAMPLE_LOG, method="support", alpha_per_m2=0.5, rate_hz=5)
+    assert list(table.columns[:2]) == ["time_s", "alt_gps_m"]
+    np.testing.assert_allclose(np.diff(table.time_s), 0.2)
+    default = altfuse.fuse_file(SAMPLE_LOG, rate_hz=5)
+    assert not np.allclose(table.fused_alt_m, default.fused_alt_m)
+    indexed = altfuse.fuse_file(SAMPLE_LOG, method="mean", time_index=True)
+    assert isinstance(indexed.index, pd.TimedeltaIndex)
+    assert indexed.index[0] == pd.Timedelta(seconds=indexed.time_s.iloc[0])
+    assert len(indexed.resample("1s").mean(numeric_only=True)) == 120
+    with pytest.raises(InvalidParameter, match=r"^beta must be a number >= 0, got -1"):
+        altfuse.fuse_file(SAMPLE_LOG, beta=-1)
+    with pytest.raises(InvalidParameter, match=r"^alpha is not a parameter of method 'support'"):
+        altfuse.fuse_file(SAMPLE_LOG, alpha=0.5)
