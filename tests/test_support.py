@@ -113,9 +113,9 @@ def test_one_valid_sensor_is_the_result_and_none_is_nan() -> None:
 
 
 def test_auto_alpha_from_the_robust_pairwise_spread() -> None:
-    # pairwise |differences| are 0.5 everywhere: s = 0.5 / 0.6745, alpha = 1 / (2 s²)
+    # pairwise |differences| are 0.5 everywhere: s = 1.482602 * 0.5, alpha = 1 / (2 s²)
     z = np.column_stack([np.zeros(20), np.full(20, 0.5)])
-    assert auto_alpha(z) == pytest.approx(0.6745**2 / (2 * 0.25), rel=1e-12)
+    assert auto_alpha(z) == pytest.approx(1 / (2 * (1.482602218505602 * 0.5) ** 2), rel=1e-12)
     # identical sensors: the spread is floored at 1 cm rather than dividing by zero
     assert auto_alpha(np.ones((5, 3))) == pytest.approx(1 / (2 * 0.01**2))
 

@@ -9,6 +9,10 @@ import numpy.typing as npt
 
 from altfuse.model import FloatArray
 
+#: The standard deviation of a normal variable over its median absolute deviation (or, for one
+#: centred on zero, over the median of its absolute value): 1 / Phi^-1(3/4) = 1.4826.
+MAD_TO_SIGMA = 1.0 / 0.6744897501960817
+
 
 @dataclass(frozen=True)
 class ErrorStats:

@@ -100,6 +100,7 @@ import numpy as np
 import pandas as pd
 
 from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult
+from altfuse.metrics import MAD_TO_SIGMA
 from altfuse.model import FloatArray, Samples
 from altfuse.params import InvalidParameter, Params, param
 
@@ -132,7 +133,6 @@ NOISE_WINDOW_S = 5.0
 Q_TERRAIN_MAX = 1.0
 MAX_SPEED_M_S = 100.0
 _MIN_SIGMA_M = 0.01
-_MAD_TO_SIGMA = 1.4826
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -166,7 +166,7 @@ class SmootherParams(Params):
 
 def _mad_sigma(x: FloatArray) -> float:
     """The standard deviation of normal ``x`` from its median absolute deviation."""
-    return _MAD_TO_SIGMA * float(np.median(np.abs(x - np.median(x))))
+    return MAD_TO_SIGMA * float(np.median(np.abs(x - np.median(x))))
 
 
 def measurement_sigma(z: FloatArray) -> float:
@@ -195,7 +195,7 @@ def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) 
     d2 = np.concatenate(([d2[0]], d2, [d2[-1]]))
     width = max(5, round(window_s / float(np.median(np.diff(t)) or 1.0)))
     med = pd.Series(d2).rolling(width, center=True, min_periods=3).median().to_numpy()
-    return np.asarray(np.maximum(_MAD_TO_SIGMA * med / math.sqrt(6.0), _MIN_SIGMA_M))
+    return np.asarray(np.maximum(MAD_TO_SIGMA * med / math.sqrt(6.0), _MIN_SIGMA_M))
 
 
 def terrain_noise(d: FloatArray, flown: FloatArray, lag: int) -> float:

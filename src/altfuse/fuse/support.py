@@ -25,7 +25,7 @@ Eq. 4 divides by ``n``, not ``n - 1``, as the paper does. The paper gives no val
   sensor. Both are marked in the output's status column.
 - ``alpha`` [1/m²] sets the disagreement that counts as "no support" and depends on units and
   noise. By default it comes from the data: ``alpha = 1 / (2 s**2)``, where ``s`` is the robust
-  spread of all pairwise differences, ``s = median|z_i - z_j| / 0.6745`` (the standard deviation
+  spread of all pairwise differences, ``s = 1.4826 median|z_i - z_j|`` (the standard deviation
   for Gaussian differences), floored at 1 cm. Two sensors that differ by ``s`` then support each
   other with ``exp(-1/2) = 0.61``, by ``3 s`` with 0.011. A fixed ``alpha`` can be given instead.
 - ``k`` comes from a window in seconds, ``k = round(window_s / dt)``, so that a faster clock
@@ -45,11 +45,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from altfuse.fuse.base import FusionInput, FusionResult, combine
+from altfuse.metrics import MAD_TO_SIGMA
 from altfuse.model import FloatArray
 from altfuse.params import Params, param
 
-#: Gaussian consistency constant: median(|x|) = 0.6745 sigma for x ~ N(0, sigma²).
-_MAD_TO_SIGMA = 0.6745
 _MIN_SPREAD_M = 0.01
 
 
@@ -81,7 +80,7 @@ def auto_alpha(z: FloatArray) -> float:
     diffs = [np.abs(z[:, i] - z[:, j]) for i in range(n) for j in range(i + 1, n)]
     pooled = np.concatenate(diffs) if diffs else np.array([])
     pooled = pooled[np.isfinite(pooled)]
-    spread = float(np.median(pooled)) / _MAD_TO_SIGMA if pooled.size else 0.0
+    spread = MAD_TO_SIGMA * float(np.median(pooled)) if pooled.size else 0.0
     spread = max(spread, _MIN_SPREAD_M)
     return 1.0 / (2.0 * spread**2)
 
