@@ -22,11 +22,10 @@ import pandas as pd
 from altfuse.datum import Referred
 from altfuse.errors import AltfuseError, NoUsableSensorsError
 from altfuse.fuse import METHODS, method
-from altfuse.io import read_log
 from altfuse.metrics import ErrorStats, error_stats
 from altfuse.model import FlightLog, FloatArray, Series
 from altfuse.params import InvalidParameter
-from altfuse.pipeline import FuseOptions, FuseRun, Prepared, prepare, run_method
+from altfuse.pipeline import FuseOptions, FuseRun, Prepared, prepare_log, run_method
 
 #: What to measure against: the simulator's truth, the EKF's estimate, or the first of them.
 TruthChoice = Literal["auto", "sim", "ekf"]
@@ -188,7 +187,7 @@ def evaluate(
     A method that cannot run on the log (``multilayer`` without IMU) is listed in ``failed``.
     """
     options = options or FuseOptions()
-    return evaluate_prepared(prepare(read_log(path), options), methods, options, truth, segments)
+    return evaluate_prepared(prepare_log(path, options), methods, options, truth, segments)
 
 
 def evaluate_prepared(

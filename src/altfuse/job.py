@@ -12,9 +12,8 @@ from typing import TYPE_CHECKING, Any
 from altfuse.errors import ParameterError
 from altfuse.evaluation import Evaluation, evaluate_prepared, truth_or_none
 from altfuse.fuse import params_for
-from altfuse.io import read_log
 from altfuse.params import fields
-from altfuse.pipeline import FuseOptions, FuseRun, fuse_log, prepare, run_method
+from altfuse.pipeline import FuseOptions, FuseRun, fuse_log, prepare_log, run_method
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.write import Writer, default_meta_path, fused_table, write_json, write_outputs
 
@@ -82,11 +81,7 @@ def fuse_to_files(
     own method).
     """
     options = options or FuseOptions()
-    started = time.perf_counter()
-    flight = read_log(path)
-    log.info("%s: read %d bytes in %.2f s", Path(path).name, flight.size_bytes,
-             time.perf_counter() - started)  # fmt: skip
-    prepared = prepare(flight, options)
+    prepared = prepare_log(path, options)
     run = run_method(prepared, options)
     extra: dict[Path, tuple[Writer, bool]] = {}
     evaluation = None

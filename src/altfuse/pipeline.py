@@ -214,14 +214,8 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
     )
 
 
-def fuse_flight(flight: FlightLog, options: FuseOptions) -> FuseRun:
-    """Fuse the altitude sources of an already-read log."""
-    return run_method(prepare(flight, options), options)
-
-
-def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
-    """Read the log at ``path`` and fuse its altitude sources (the ``altfuse fuse`` job)."""
-    options = options or FuseOptions()
+def prepare_log(path: str | Path, options: FuseOptions) -> Prepared:
+    """Read the log at ``path`` and :func:`prepare` it."""
     started = time.perf_counter()
     flight = read_log(path)
     log.info(
@@ -230,7 +224,13 @@ def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
         flight.size_bytes,
         time.perf_counter() - started,
     )
-    return fuse_flight(flight, options)
+    return prepare(flight, options)
+
+
+def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
+    """Read the log at ``path`` and fuse its altitude sources (the ``altfuse fuse`` job)."""
+    options = options or FuseOptions()
+    return run_method(prepare_log(path, options), options)
 
 
 def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
