@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from altfuse.align import align, cell_means, merge_duplicates, resample
+from altfuse.align import (
+    align,
+    cell_means,
+    estimate_lag,
+    gps_lags,
+    merge_duplicates,
+    resample,
+    shift,
+)
 from altfuse.errors import NoUsableSensorsError
 from altfuse.model import Series
 
@@ -97,3 +105,36 @@ def test_disjoint_sensors_have_no_overlap() -> None:
     b = series("gps", np.arange(10.0, 15.0, 0.2), np.ones(25), kind="gps")
     with pytest.raises(NoUsableSensorsError, match="overlap"):
         align([a, b], span="overlap")
+
+
+def climb_profile(t: np.ndarray) -> np.ndarray:
+    """Climbs and descents at up to 3 m/s, with a wobble: a flight whose rates tell a lag."""
+    return 40 * (1 - np.cos(2 * np.pi * t / 60)) + 2 * np.sin(2 * np.pi * t / 7)
+
+
+@pytest.mark.parametrize("lag_s", [0.0, 0.1, 0.25, 0.4])
+def test_a_known_gps_lag_is_found_against_the_barometer(lag_s: float) -> None:
+    rng = np.random.default_rng(2)
+    tb = np.arange(0.0, 120.0, 0.1)
+    tg = np.arange(0.0, 120.0, 0.2) + 0.013
+    baro = series("baro", tb, 1.05 * climb_profile(tb) + rng.normal(0, 0.1, tb.size))
+    gps = series("gps", tg, climb_profile(tg - lag_s) + rng.normal(0, 0.05, tg.size), "gps")
+    lag = estimate_lag(gps, baro)
+    assert lag.lag_s == pytest.approx(lag_s, abs=0.015)  # the 5 % scale does not pull it
+    assert lag.explained is not None
+    assert lag.explained > 0.99
+    assert gps_lags([gps, baro]) == {"gps": lag}
+    moved = shift(gps, lag)
+    np.testing.assert_allclose(moved.t, gps.t - lag.lag_s)
+
+
+def test_no_lag_where_the_reference_explains_too_little() -> None:
+    rng = np.random.default_rng(3)
+    tb, tg = np.arange(0.0, 120.0, 0.1), np.arange(0.0, 120.0, 0.2)
+    hover = 0.2 * np.sin(tb / 5)  # a hover: the GPS's noise is all its changes hold
+    baro = series("baro", tb, hover + rng.normal(0, 0.05, tb.size))
+    gps = series("gps", tg, rng.normal(0, 0.5, tg.size) + np.interp(tg - 0.3, tb, hover), "gps")
+    lag = estimate_lag(gps, baro)
+    assert lag.lag_s == 0.0
+    assert lag.how.startswith("not estimated: baro explains")
+    assert gps_lags([gps]) == {}  # no barometer, no lag

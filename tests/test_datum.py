@@ -115,3 +115,52 @@ def test_rangefinder_tilt_correction() -> None:
     salt = Series("rangefinder", "rangefinder", "CTUN.SAlt", "ground", t, np.full(4, 10.0))
     assert tilt_correct(salt, att) is salt
     assert "not tilt-corrected" in tilt_correct(rfnd, None).datum
+
+
+def scaled_flight(
+    scale: float, climb_m: float, drift_m_per_min: float = 0.0, seed: int = 4
+) -> tuple[Aligned, np.ndarray]:
+    """A barometer ``scale`` times the truth (plus a drift in time), a GPS with a slow random
+    walk; 20 s on the ground, a climb to ``climb_m``, a hold, a descent; 10 Hz."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 200.0, 0.1)
+    h = np.interp(t, [0, 20, 60, 140, 180, 200], [0, 0, climb_m, climb_m, 0, 0])
+    gps = 500 + h + np.cumsum(rng.normal(0, 0.02, t.size)) + rng.normal(0, 0.3, t.size)
+    baro = 2.0 + scale * h + drift_m_per_min * t / 60 + rng.normal(0, 0.1, t.size)
+    names = ("gps", "baro")
+    return Aligned(t, names, names, np.column_stack([gps, baro]), 10.0, 1.0, "union", {}), h
+
+
+def test_a_known_barometer_scale_is_found_and_removed() -> None:
+    aligned, h = scaled_flight(1.05, 150.0)
+    ref = refer_to_takeoff(aligned)
+    baro = {o.name: o for o in ref.offsets}["baro"]
+    # the GPS's 0.9 m of wander over the flight: the scale to 0.3 %, within its error
+    assert baro.scale == pytest.approx(1.05, abs=0.006)
+    assert baro.scale_std is not None
+    assert baro.scale_std < 0.006
+    assert abs(baro.scale - 1.05) < 2 * baro.scale_std
+    assert "against gps over the flight" in str(baro.scale_method)
+    error = ref.h[:, 1] - h
+    assert np.sqrt(np.mean(error**2)) < 0.35  # offset only: 4.5 m at the top
+    offset_only = refer_to_takeoff(aligned, referral="offset")
+    assert {o.name: o for o in offset_only.offsets}["baro"].scale == 1.0
+    assert np.max(np.abs(offset_only.h[:, 1] - h)) > 7.0
+
+
+@pytest.mark.parametrize(
+    ("scale", "climb_m", "drift", "why"),
+    [
+        (1.05, 5.0, 0.0, "too little vertical range"),  # 5 m: the GPS's wander is as large
+        (1.0, 150.0, 0.3, "not different from 1"),  # a drift in time is not a scale
+        (1.5, 150.0, 0.0, "implausible"),
+    ],
+)
+def test_a_scale_the_flight_cannot_tell_is_not_applied(
+    scale: float, climb_m: float, drift: float, why: str
+) -> None:
+    aligned, _ = scaled_flight(scale, climb_m, drift)
+    baro = {o.name: o for o in refer_to_takeoff(aligned).offsets}["baro"]
+    assert baro.scale == 1.0
+    assert str(baro.scale_method).startswith("not applied")
+    assert why in str(baro.scale_method)

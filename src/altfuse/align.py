@@ -19,10 +19,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal, get_args
 
 import numpy as np
+import numpy.typing as npt
 from scipy.interpolate import CubicSpline
 
 from altfuse.errors import NoUsableSensorsError
@@ -179,3 +180,115 @@ def align(
         span=span,
         stats=stats,
     )
+
+
+#: The lags searched [s], and their step: a GPS trails the barometer by 0.1-0.4 s in the
+#: simulators' logs; a negative lag is a sensor that leads.
+LAG_RANGE_S = (-0.5, 1.0)
+LAG_STEP_S = 0.01
+#: Lags are matched on changes over this span [s]: over one 5 Hz GPS interval the barometer's
+#: noise swamps the rate (a log with SIM_BARO_RND 0.2 gave 0.11 s where the truth says 0.21 s).
+LAG_SPAN_S = 1.0
+#: Least share of the sensor's changes the reference's must explain for a lag to be estimated:
+#: with the simulators' GPS 0.97-1.00; with altfuse's own simulated GPS (0.3-1 m of noise, a
+#: slow random walk) 0.57-0.82, and there the estimate was 0.1-0.6 s off.
+LAG_MIN_EXPLAINED = 0.9
+#: The reference is averaged over this span [s] around each time it is read at.
+LAG_BOX_S = 0.3
+
+
+@dataclass(frozen=True)
+class Lag:
+    """How far a sensor trails the reference [s], and how that was found. Its samples are
+    moved ``lag_s`` earlier before alignment (0 when not estimated)."""
+
+    sensor: str
+    reference: str
+    lag_s: float
+    explained: float | None  # share of its changes over LAG_SPAN_S the reference explains
+    how: str
+
+
+def estimate_lag(series: Series, reference: Series) -> Lag:
+    """The lag of ``series`` behind ``reference``: the shift of its sample times at which its
+    changes over ``LAG_SPAN_S`` correlate best with the reference's.
+
+    For each candidate lag ``tau``, with ``d`` the change of the series between samples
+    ``LAG_SPAN_S`` apart and ``r`` the reference's change between the same times less ``tau``,
+    the lag maximises ``sum d r`` (the rates' cross-correlation: the reference's noise does not
+    bias it, where a least-squares fit would favour the lags at which interpolation averages
+    neighbouring samples). At that lag, with a free gain ``k`` (a barometer's scale error)::
+
+        explained = 1 - min_k sum (d - k r)^2 / sum d^2
+
+    The lag is kept when it lies inside ``LAG_RANGE_S`` and the reference explains at least
+    ``LAG_MIN_EXPLAINED`` of the changes; otherwise it is 0.
+    """
+    t, v = merge_duplicates(series.t, series.value)
+    rt, rv = merge_duplicates(reference.t, reference.value)
+    none = Lag(series.name, reference.name, 0.0, None, "not estimated: too few samples")
+    if t.size < 10 or rt.size < 10:
+        return none
+    step = float(np.median(np.diff(t)))
+    k = max(1, round(LAG_SPAN_S / step)) if step > 0 else 1
+    if t.size <= k:
+        return none
+    apart = (t[k:] - t[:-k]) <= 1.5 * LAG_SPAN_S  # no gap between the two samples
+    # nor in the reference wherever a lag searched would read it (it is interpolated there)
+    covered = _covered(t, rt, LAG_RANGE_S[0] - LAG_BOX_S, LAG_RANGE_S[1] + LAG_BOX_S)
+    apart &= covered[k:] & covered[:-k]
+    d = (v[k:] - v[:-k])[apart]
+    energy = float(np.dot(d, d))
+    if d.size < 10 or energy <= 0:
+        return Lag(series.name, reference.name, 0.0, None, "not estimated: no motion")
+    taus = np.arange(LAG_RANGE_S[0], LAG_RANGE_S[1] + LAG_STEP_S / 2, LAG_STEP_S)
+    # the reference's mean over LAG_BOX_S around each time, from its running integral: a point
+    # interpolated between two samples averages their noise, one on a sample does not, and a
+    # fit would favour the lags that fall between samples
+    integral = np.concatenate(([0.0], np.cumsum(0.5 * (rv[1:] + rv[:-1]) * np.diff(rt))))
+    half = LAG_BOX_S / 2
+    explained_at = np.empty(taus.size)
+    for j, tau in enumerate(taus):
+        lo, hi = t - tau - half, t - tau + half
+        at = (np.interp(hi, rt, integral) - np.interp(lo, rt, integral)) / LAG_BOX_S
+        r = (at[k:] - at[:-k])[apart]
+        rr = float(np.dot(r, r))
+        explained_at[j] = float(np.dot(d, r)) ** 2 / (rr * energy) if rr > 0 else 0.0
+    best = int(np.argmax(explained_at))
+    explained = float(explained_at[best])
+    tau = float(np.round(taus[best], 3))
+    if best in (0, taus.size - 1):
+        how = f"not estimated: the best match ({tau:+.2f} s) is at the edge of the search"
+        return Lag(series.name, reference.name, 0.0, explained, how)
+    if explained < LAG_MIN_EXPLAINED:
+        how = (
+            f"not estimated: {reference.name} explains {explained:.0%} of its changes "
+            f"(< {LAG_MIN_EXPLAINED:.0%})"
+        )
+        return Lag(series.name, reference.name, 0.0, explained, how)
+    how = f"changes matched to {reference.name}'s ({explained:.1%} explained)"
+    return Lag(series.name, reference.name, tau, explained, how)
+
+
+def _covered(t: FloatArray, rt: FloatArray, lo: float, hi: float) -> npt.NDArray[np.bool_]:
+    """Whether the reference's samples ``rt`` leave no gap (over 0.5 s or five of its steps)
+    between ``t - hi`` and ``t - lo``, and span them, for each ``t``."""
+    step = float(np.median(np.diff(rt)))
+    gap = np.flatnonzero(np.diff(rt) > max(0.5, 5 * step))
+    inside = (t - hi >= rt[0]) & (t - lo <= rt[-1])
+    for g in gap:
+        inside &= ~((t - hi < rt[g + 1]) & (t - lo > rt[g]))
+    return np.asarray(inside, dtype=bool)
+
+
+def gps_lags(series: Sequence[Series]) -> dict[str, Lag]:
+    """Each GPS's lag behind the first barometer (:func:`estimate_lag`); none without one."""
+    baros = [s for s in series if s.kind == "baro"]
+    if not baros:
+        return {}
+    return {s.name: estimate_lag(s, baros[0]) for s in series if s.kind == "gps"}
+
+
+def shift(series: Series, lag: Lag) -> Series:
+    """``series`` with its sample times moved ``lag.lag_s`` earlier."""
+    return series if lag.lag_s == 0 else replace(series, t=series.t - lag.lag_s)

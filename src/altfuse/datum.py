@@ -16,8 +16,14 @@ with one constant offset ``c_i``, found in this order:
    from the referred reference over the first ``ground_s`` seconds where both are valid.
 3. Otherwise it is dropped, with that reason.
 
-A constant offset is all that is removed: a source that is right but offset keeps its full
-weight, and drift (the barometer's) stays in the data, where fusion is meant to see it.
+A barometer is also scaled (``referral="full"``, the default): ``h = (z - c) / scale``, the
+scale fitted against the GPS over the flight (:func:`baro_scales`). Barometers read 3-8 % high
+in the simulators' climbs (16 m at 305 m) and real ones do the same (a sensor warmer than the
+air; ArduPilot issue 15025: "both an offset and a gain"); an offset alone leaves that to every
+method that averages. The scale is applied only where the flight can tell it: enough vertical
+range against the GPS's own error, a value different from 1 and plausible; the metadata says
+which, and why not. A drift in time is fitted beside it and left in the data, where fusion is
+meant to see it; a source that is right but offset keeps its full weight.
 
 Before that, :func:`tilt_correct` turns a rangefinder's distance along the body's down axis into a
 vertical height, ``d * cos(roll) * cos(pitch)``, with the logged attitude (``CTUN.SAlt`` comes
@@ -26,8 +32,10 @@ tilt-corrected by the autopilot and is left alone).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -35,6 +43,7 @@ import pandas as pd
 
 from altfuse.align import Aligned, merge_duplicates
 from altfuse.errors import NoUsableSensorsError
+from altfuse.metrics import MAD_TO_SIGMA
 from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Samples, SensorKind, Series
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
@@ -46,15 +55,62 @@ TAKEOFF_MARGIN_S = 1.0
 STILL_MARGIN_S = 3.0
 
 
+Referral = Literal["full", "offset"]
+#: A barometer's scale is applied when its standard error is at most this [-]...
+MAX_SCALE_STD = 0.01
+#: ... it differs from 1 by this many standard errors (a barometer right to within its error
+#: keeps its own scale) ...
+SCALE_MIN_SIGMAS = 2.0
+#: ... and it lies in this range: a barometer off by more than a quarter is broken, not biased.
+SCALE_RANGE = (0.8, 1.25)
+#: A GPS's error wanders (a random walk of metres over minutes): its heights' errors are
+#: correlated over a flight, so the fit on the heights counts one independent sample per
+#: SCALE_BLOCK_S [s], and the fit on the heights' changes over successive spans (the flight's
+#: length over SCALE_CHANGES, within SCALE_SPAN_S [s]), whose errors are nearly independent,
+#: must agree: the scale's standard error is the larger of the two.
+SCALE_BLOCK_S = 10.0
+SCALE_CHANGES = 16
+SCALE_SPAN_S = (2.0, 10.0)
+#: Fewest changes (and twice as many ticks) a scale is fitted on.
+SCALE_MIN_CHANGES = 8
+#: A residual is an outlier of the scale's fit only beyond 3 sigma and this [m] (a simulator's
+#: noiseless sensors have a sigma of millimetres).
+SCALE_MIN_OUTLIER_M = 0.1
+
+
 @dataclass(frozen=True)
 class Offset:
-    """The constant removed from one source, and how it was found."""
+    """How one source was referred: ``h = (z - offset_m) / scale``, and how each was found."""
 
     name: str
     offset_m: float
     method: str
     window_s: tuple[float, float]
     ticks: int
+    scale: float = 1.0
+    scale_std: float | None = None
+    scale_method: str | None = None  # None: not a barometer
+
+
+@dataclass(frozen=True)
+class Scale:
+    """A barometer's scale against a GPS: ``z_baro - c = scale * h_gps + b`` over the flight."""
+
+    scale: float
+    std: float | None  # None: not estimated
+    reference: str
+    how: str
+    applied: bool
+
+
+@dataclass(frozen=True)
+class _Ground:
+    """Where the offsets are measured: the ground window (or the log's first seconds)."""
+
+    window: npt.NDArray[np.bool_]
+    how: str
+    seconds: float
+    ref: int
 
 
 @dataclass(frozen=True)
@@ -146,7 +202,10 @@ def detect_takeoff(
 
 
 def refer_to_takeoff(
-    aligned: Aligned, ground_window_s: float = 5.0, takeoff_climb_m: float = 1.0
+    aligned: Aligned,
+    ground_window_s: float = 5.0,
+    takeoff_climb_m: float = 1.0,
+    referral: Referral = "full",
 ) -> Referred:
     """Subtract from each source its offset to height above take-off (see module doc).
 
@@ -158,6 +217,9 @@ def refer_to_takeoff(
         Length of the ground window [s], > 0 (checked by :class:`altfuse.FuseOptions`).
     takeoff_climb_m
         Rise of the reference source that marks take-off [m], > 0.
+    referral
+        ``full``: each barometer's scale too, where the flight can tell it (:func:`baro_scales`);
+        ``offset``: offsets only.
     """
     ground_s, climb_m = ground_window_s, takeoff_climb_m
     t, z = aligned.t, aligned.z
@@ -180,29 +242,15 @@ def refer_to_takeoff(
     win_idx = np.flatnonzero(window & ref_valid)
     ground_window = (float(t[win_idx[0]]), float(t[win_idx[-1]]))
 
-    offsets: dict[int, Offset] = {}
-    h = np.full_like(z, np.nan)
-    dropped: dict[str, str] = {}
-    order = [ref] + [i for i in range(len(aligned.names)) if i != ref]
-    for i in order:
-        name, valid = aligned.names[i], np.isfinite(z[:, i])
-        on_ground = window & valid
-        if on_ground.sum() >= MIN_WINDOW_TICKS or (i == ref and on_ground.any()):
-            sel, base, how = on_ground, np.zeros_like(t), f"median over the {ground_how}"
-        else:
-            sel = _first_seconds(valid & np.isfinite(h[:, ref]), t, ground_s)
-            if sel.sum() < MIN_WINDOW_TICKS:
-                dropped[name] = (
-                    f"no sample on the ground and too few beside {aligned.names[ref]} "
-                    "to find its datum"
-                )
-                continue
-            base = h[:, ref]
-            how = f"median difference from {aligned.names[ref]} (no samples on the ground)"
-        offset = float(np.median(z[sel, i] - base[sel]))
-        sel_t = t[sel]
-        offsets[i] = Offset(name, offset, how, (float(sel_t[0]), float(sel_t[-1])), int(sel.sum()))
-        h[:, i] = z[:, i] - offset
+    ground = _Ground(window, ground_how, ground_s, ref)
+    offsets, h, dropped = _refer(aligned, ground, {})
+    if referral == "full":
+        scales = baro_scales(aligned, h, offsets)
+        if any(sc.applied for sc in scales.values()):
+            offsets, h, dropped = _refer(aligned, ground, scales)
+        for i, sc in scales.items():
+            if i in offsets:
+                offsets[i] = replace(offsets[i], scale_std=sc.std, scale_method=sc.how)
 
     keep = [i for i in range(len(aligned.names)) if i in offsets]
     return Referred(
@@ -218,6 +266,117 @@ def refer_to_takeoff(
     )
 
 
+def _refer(
+    aligned: Aligned, ground: _Ground, scales: dict[int, Scale]
+) -> tuple[dict[int, Offset], FloatArray, dict[str, str]]:
+    """Every source's offset (on the ground, else matched to the referred reference) and its
+    referred heights ``(z - c) / scale``, with the scales given; the sources dropped, and why."""
+    t, z, ref = aligned.t, aligned.z, ground.ref
+    offsets: dict[int, Offset] = {}
+    h = np.full_like(z, np.nan)
+    dropped: dict[str, str] = {}
+    order = [ref] + [i for i in range(len(aligned.names)) if i != ref]
+    for i in order:
+        name, valid = aligned.names[i], np.isfinite(z[:, i])
+        scale = scales[i].scale if i in scales and scales[i].applied else 1.0
+        on_ground = ground.window & valid
+        if on_ground.sum() >= MIN_WINDOW_TICKS or (i == ref and on_ground.any()):
+            sel, base, how = on_ground, np.zeros_like(t), f"median over the {ground.how}"
+        else:
+            sel = _first_seconds(valid & np.isfinite(h[:, ref]), t, ground.seconds)
+            if sel.sum() < MIN_WINDOW_TICKS:
+                dropped[name] = (
+                    f"no sample on the ground and too few beside {aligned.names[ref]} "
+                    "to find its datum"
+                )
+                continue
+            base = h[:, ref]
+            how = f"median difference from {aligned.names[ref]} (no samples on the ground)"
+        offset = float(np.median(z[sel, i] - scale * base[sel]))
+        sel_t = t[sel]
+        window = (float(sel_t[0]), float(sel_t[-1]))
+        offsets[i] = Offset(name, offset, how, window, int(sel.sum()), scale)
+        h[:, i] = (z[:, i] - offset) / scale
+    return offsets, h, dropped
+
+
+def baro_scales(aligned: Aligned, h: FloatArray, offsets: dict[int, Offset]) -> dict[int, Scale]:
+    """Each barometer's scale against the GPS with the most referred ticks (see the module doc).
+
+    ``h`` holds the sources referred by offsets only. Over the ticks where both are valid,
+    ``h_baro = scale * h_gps + drift * t + b`` by least squares, twice more without those beyond
+    3 sigma (a glitch), with a drift in time (a barometer warming: a drift is not a scale)
+    and a constant ``b`` (a datum matched in flight). Its standard error is the larger of that
+    fit's (one sample per ``SCALE_BLOCK_S``) and the same fit's on the changes over successive
+    spans (``SCALE_CHANGES``): the GPS's wander counts. Applied when that error is at most
+    ``MAX_SCALE_STD``, the scale differs from 1 by ``SCALE_MIN_SIGMAS`` of it and lies in
+    ``SCALE_RANGE``; otherwise the barometer keeps scale 1 and the record says why.
+    """
+    kinds, names = aligned.kinds, aligned.names
+    gps = [j for j in offsets if kinds[j] == "gps"]
+    baros = [i for i in offsets if kinds[i] == "baro"]
+    if not baros:
+        return {}
+    if not gps:
+        return {i: Scale(1.0, None, "", "not estimated: no GPS", False) for i in baros}
+    j = max(gps, key=lambda j: (int(np.isfinite(h[:, j]).sum()), -j))
+    return {i: _scale(aligned.t, h[:, j], h[:, i], names[j]) for i in baros}
+
+
+def _scale(t: FloatArray, x: FloatArray, y: FloatArray, reference: str) -> Scale:
+    """``y = scale x + drift t + b``, the scale and its standard error (see
+    :func:`baro_scales`)."""
+    both = np.isfinite(x) & np.isfinite(y)
+    if both.sum() < 2 * SCALE_MIN_CHANGES:
+        return Scale(1.0, None, reference, f"not estimated: too few ticks beside {reference}",
+                     False)  # fmt: skip
+    minutes = (t - t[both][0]) / 60.0
+    levels = np.column_stack([x, minutes, np.ones(t.size)])
+    fit = _robust_fit(levels[both], y[both])
+    lo, hi = SCALE_SPAN_S
+    span = min(max(float(np.ptp(t[both])) / SCALE_CHANGES, lo), hi)
+    k = max(1, round(span / float(t[1] - t[0])))
+    # the same on the changes over successive spans: drift and b become one constant
+    dx, dy = x[::k][1:] - x[::k][:-1], y[::k][1:] - y[::k][:-1]
+    ok = np.isfinite(dx) & np.isfinite(dy)
+    changes = _robust_fit(np.column_stack([dx[ok], np.ones(int(ok.sum()))]), dy[ok])
+    if fit is None or changes is None:
+        return Scale(1.0, None, reference, "not estimated: no vertical range", False)
+    scale = float(fit[0])
+    blocks = float(np.ptp(t[both])) / SCALE_BLOCK_S
+    std = max(fit[1] * math.sqrt(both.sum() / max(blocks, 2.0)), changes[1])
+    label = f"{scale:.4f} +- {std:.4f} against {reference}"
+    if not std <= MAX_SCALE_STD:
+        how = f"not applied: {label}: too little vertical range to tell"
+        return Scale(scale, std, reference, how, False)
+    if abs(scale - 1.0) < SCALE_MIN_SIGMAS * std:
+        how = f"not applied: {label}: not different from 1"
+        return Scale(scale, std, reference, how, False)
+    if not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
+        return Scale(scale, std, reference, f"not applied: {label}: implausible", False)
+    return Scale(scale, std, reference, f"{label} over the flight", True)
+
+
+def _robust_fit(design: FloatArray, y: FloatArray) -> tuple[float, float] | None:
+    """The first coefficient of ``y ~ design`` by least squares, refitted twice without the
+    residuals beyond 3 sigma (and ``SCALE_MIN_OUTLIER_M``), and its least-squares standard
+    error; None when too few rows are left or the design cannot tell the coefficient."""
+    keep = np.ones(y.size, dtype=bool)
+    for _ in range(3):
+        if keep.sum() < SCALE_MIN_CHANGES:
+            return None
+        coef, *_ = np.linalg.lstsq(design[keep], y[keep], rcond=None)
+        r = y - design @ coef
+        sigma = MAD_TO_SIGMA * float(np.median(np.abs(r[keep] - np.median(r[keep]))))
+        keep = np.abs(r) <= max(3.0 * sigma, SCALE_MIN_OUTLIER_M)
+    n, p = int(keep.sum()), design.shape[1]
+    normal = design[keep].T @ design[keep]
+    if n <= p + 1 or np.linalg.cond(normal) > 1e12:
+        return None
+    variance = float(np.sum(r[keep] ** 2)) / (n - p) * float(np.linalg.inv(normal)[0, 0])
+    return float(coef[0]), math.sqrt(variance)
+
+
 def referred_samples(sensors: Sequence[Series], referred: Referred) -> tuple[Samples, ...]:
     """Each referred sensor's own samples (time, height above take-off), duplicates merged, in
     the clock's column order."""
@@ -225,5 +384,5 @@ def referred_samples(sensors: Sequence[Series], referred: Referred) -> tuple[Sam
     out = []
     for o in referred.offsets:
         s = by_name[o.name]
-        out.append(Samples(*merge_duplicates(s.t, s.value - o.offset_m)))
+        out.append(Samples(*merge_duplicates(s.t, (s.value - o.offset_m) / o.scale)))
     return tuple(out)

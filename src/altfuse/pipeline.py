@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 
 from altfuse import __version__
-from altfuse.align import Aligned, Span, align
-from altfuse.datum import Referred, refer_to_takeoff, referred_samples, tilt_correct
+from altfuse.align import Aligned, Lag, Span, align, gps_lags, shift
+from altfuse.datum import Referral, Referred, refer_to_takeoff, referred_samples, tilt_correct
 from altfuse.errors import NoUsableSensorsError, ParameterError, UnsupportedLogError
 from altfuse.fuse import METHODS, FusionInput, FusionResult, Method, method
 from altfuse.inertial import referred_vertical_acceleration
@@ -53,6 +53,11 @@ class FuseOptions:
     takeoff_climb_m: float = param(1.0, help="rise that marks take-off", unit="m", check="positive")
     min_sensors: int = param(
         2, help="fail unless at least this many altitude sources are usable", check="at least 1"
+    )
+    referral: Referral = param(
+        "full",
+        help="how sensors are referred to one clock and datum: 'full' (offset, a barometer's "
+        "scale and a GPS's lag where the flight shows them) or 'offset' (an offset only)",
     )
 
     def __post_init__(self) -> None:
@@ -106,10 +111,11 @@ class Prepared:
     """The method-independent stages of a run: sources tilt-corrected, aligned and referred."""
 
     log: FlightLog
-    sensors: list[Series]
+    sensors: list[Series]  # as aligned: tilt-corrected, each GPS moved by its lag
     aligned: Aligned
     referred: Referred
     dropped: dict[str, str]
+    lags: dict[str, Lag]
 
 
 def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
@@ -126,9 +132,13 @@ def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     started = time.perf_counter()
     sensors = [tilt_correct(s, flight.attitude) for s in flight.sensors]
     sensors = [s for s in sensors if s.t.size]
+    lags = gps_lags(sensors) if options.referral == "full" else {}
+    sensors = [shift(s, lags[s.name]) if s.name in lags else s for s in sensors]
     aligned = align(sensors, options.rate_hz, options.max_gap_s, options.span)
     aligned_at = time.perf_counter()
-    referred = refer_to_takeoff(aligned, options.ground_window_s, options.takeoff_climb_m)
+    referred = refer_to_takeoff(
+        aligned, options.ground_window_s, options.takeoff_climb_m, options.referral
+    )
     log.info(
         "%s: aligned %d ticks in %.2f s, datum in %.2f s",
         name,
@@ -138,7 +148,7 @@ def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     )
     dropped.update(referred.dropped)
     _require_sensors(name, referred.names, options, dropped)
-    return Prepared(flight, sensors, aligned, referred, dropped)
+    return Prepared(flight, sensors, aligned, referred, dropped, lags)
 
 
 def _samples(series: Series | None) -> Samples | None:
@@ -271,6 +281,9 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
                     "method": o.method,
                     "window_s": list(o.window_s),
                     "ticks": o.ticks,
+                    "scale": o.scale,
+                    "scale_std": o.scale_std,
+                    "scale_method": o.scale_method,
                 }
                 for o in referred.offsets
             ],
@@ -284,6 +297,7 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
                 "samples": int(s.t.size),
                 "samples_dropped": s.dropped,
                 "alignment": vars(aligned.stats[s.name]),
+                **({"lag": asdict(prepared.lags[s.name])} if s.name in prepared.lags else {}),
             }
             for s in prepared.sensors
             if s.name in referred.names

@@ -26,8 +26,9 @@ Measurements, each fused at its own sample time (no resampling before fusion)::
     GPS:  z_i = h + c_i + n_i       barometer:  z_i = h + c_i + k_j (T - T_0) + n_i
     rangefinder:  z_i = h - c_i + n_i
 
-A GPS's lag (0.2 s in the simulator) is not modelled: estimated from the log and undone, it
-changed no simulated flight's RMSE by more than 0.01 m, and the estimate was unstable.
+A GPS's lag is not modelled here: the pipeline moves each GPS's samples earlier by the lag it
+measures against the barometer (:func:`altfuse.align.estimate_lag`; 0.1-0.4 s on the
+simulators' logs, not estimated on altfuse's own simulated flights, whose GPS noise hides it).
 
 On the ground before take-off (the datum's ground window, ending ``STILL_MARGIN_S`` before the
 detected take-off) the vehicle stands at the take-off point: ``h = 0`` and ``v = 0`` there. This

@@ -130,9 +130,23 @@ class _Records:
 
     def timed(self, type_name: str, *fields: str) -> bool:
         """:meth:`has`, and the type has a time field (damage can rename it in its FMT)."""
-        return self.has(type_name, *fields) and (
-            self.has(type_name, "TimeUS") or self.has(type_name, "TimeMS")
-        )
+        return self.has(type_name, *fields) and self._time_field(type_name) is not None
+
+    def _time_field(self, type_name: str) -> tuple[str, float] | None:
+        """The field that holds a record's time since boot, and its units per second.
+
+        ``TimeUS`` [us], else ``TimeMS`` [ms] where it is the first field. In Copter up to 3.4
+        and Plane up to 3.3 a GPS record's ``TimeMS`` is the GPS time of week and its boot time
+        is ``T`` [ms], as pymavlink's DFReaderClock_msec reads it.
+        """
+        columns = self.formats[type_name].columns
+        if "TimeUS" in columns:
+            return "TimeUS", 1e6
+        if columns[:1] == ("TimeMS",):
+            return "TimeMS", 1e3
+        if "T" in columns:
+            return "T", 1e3
+        return ("TimeMS", 1e3) if "TimeMS" in columns else None
 
     def raw(self, type_name: str, col: str) -> FloatArray:
         """A numeric field as pymavlink decodes it (legacy format scales applied); computed once
@@ -151,10 +165,12 @@ class _Records:
         return self.raw(type_name, col) * self.multiplier(type_name, col)
 
     def times(self, type_name: str) -> FloatArray:
-        """Record times [s]: TimeUS / 1e6, or TimeMS / 1e3 in old logs."""
-        if self.has(type_name, "TimeUS"):
-            return self.raw(type_name, "TimeUS") / 1e6
-        return self.raw(type_name, "TimeMS") / 1e3
+        """Record times since boot [s] (see :meth:`_time_field`)."""
+        found = self._time_field(type_name)
+        if found is None:
+            raise KeyError(f"{type_name} has no time field")
+        name, per_second = found
+        return self.raw(type_name, name) / per_second
 
     def multiplier(self, type_name: str, col: str) -> float:
         fmt = self.formats[type_name]
