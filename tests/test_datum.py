@@ -164,3 +164,13 @@ def test_a_scale_the_flight_cannot_tell_is_not_applied(
     assert baro.scale == 1.0
     assert str(baro.scale_method).startswith("not applied")
     assert why in str(baro.scale_method)
+
+
+def test_a_rangefinder_without_ground_readings_takes_its_ground_clearance() -> None:
+    aligned, h = flight()  # the rangefinder reads 0.2 m + h, nothing on the ground
+    ref = refer_to_takeoff(aligned, clearances={"rangefinder": 0.2})
+    rangefinder = {o.name: o for o in ref.offsets}["rangefinder"]
+    assert rangefinder.offset_m == 0.2
+    assert rangefinder.method.startswith("its ground clearance, 0.20 m")
+    assert rangefinder.window_s is None
+    np.testing.assert_allclose(ref.h[:, 2][np.isfinite(ref.h[:, 2])], h[250:], atol=0.1)

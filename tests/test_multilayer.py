@@ -173,3 +173,22 @@ def test_multilayer_without_imu_fails_in_one_line_and_others_still_work(tmp_path
         target = tmp_path / f"{method}.csv"
         ok = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(target), "-m", method])
         assert ok.exit_code == 0, ok.output
+
+
+def test_a_roll_through_180_degrees_keeps_the_vertical_acceleration() -> None:
+    """A hover-still vehicle rolling at 300 deg/s (ATT at 10 Hz: 30 deg a sample, logged in
+    -180..180): interpolated on the unwrapped angles, a_up stays 0 through the crossing."""
+    rate = np.radians(300.0)
+    t_att = np.arange(0.0, 3.0, 0.1)
+    wrapped = np.angle(np.exp(1j * (np.radians(120.0) + rate * t_att)))  # crosses +-180 deg
+    att = Attitude("ATT", t_att, wrapped, np.zeros(t_att.size), np.zeros(t_att.size))
+    t = np.arange(0.0, 2.9, 0.02)
+    roll = np.radians(120.0) + rate * t
+    # at rest: f = R^T (0, 0, -g); rolled about x only, its last row is (0, sin r, cos r)
+    f_body = np.column_stack([np.zeros(t.size), -G * np.sin(roll), -G * np.cos(roll)])
+    _, a_up = vertical_acceleration(Imu("IMU", t, f_body), att)
+    np.testing.assert_allclose(a_up, 0.0, atol=1e-9)
+    # the linear interpolation of the logged angles made up to 2 g of it near the crossing
+    naive = np.interp(t, t_att, wrapped)
+    f_down = np.sin(naive) * f_body[:, 1] + np.cos(naive) * f_body[:, 2]
+    assert np.max(np.abs(-f_down - G)) > 10.0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,15 +14,20 @@ from click.testing import CliRunner
 from altfuse.align import MAX_TICKS, align
 from altfuse.cli import cli
 from altfuse.errors import NoUsableSensorsError
-from altfuse.model import Series
+from altfuse.info import damage
+from altfuse.model import FlightLog, Series
+from altfuse.pipeline import fuse_log
 from altfuse.screen import (
     BACKWARDS,
+    BELOW_MINIMUM,
     CODE,
     ENVELOPE,
     OUTSIDE_LOG,
     PINNED,
     SPIKE,
+    STUCK,
     log_span,
+    screen,
     screen_series,
 )  # fmt: skip
 from altfuse.simulate import SimulatedFlight, simulate_flight, write_simulated_log
@@ -161,3 +167,61 @@ def test_the_input_is_opened_read_only(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(tmp_path / "o.csv")])
     assert result.exit_code == 0, result.output
     assert log.read_bytes() == SAMPLE_LOG.read_bytes()
+
+
+def _log(*sensors: Series, params: dict[str, float] | None = None) -> FlightLog:
+    return FlightLog(
+        "test.bin", "", 0, "copter", "test", sensors, (), None, None, {}, 0, params=params or {}
+    )
+
+
+def test_a_sensor_stuck_while_the_others_move_is_dropped_and_counted() -> None:
+    t = np.arange(0.0, 60.0, 0.2)
+    climb = np.interp(t, [0, 20, 40, 60], [0, 0, 15, 15])
+    rng = np.random.default_rng(5)
+    baro = series("baro", t, climb + rng.normal(0, 0.1, t.size))
+    gps2 = series("gps2", t, 500 + climb + rng.normal(0, 0.3, t.size))
+    stuck = gps2.value.copy()
+    stuck[(t >= 15) & (t < 45)] = 0.0  # 0.00 m with a 3D fix for 30 s, through the climb
+    flight = screen(_log(baro, replace(gps2, value=stuck)))
+    out = next(s for s in flight.sensors if s.name == "gps2")
+    assert out.dropped == {STUCK: 150}
+    assert (out.value != 0.0).all()
+    # the same run while everything rests on the ground is a sensor at rest, not stuck
+    resting = stuck.copy()
+    resting[(t >= 15) & (t < 45)] = 512.0
+    still = screen(
+        _log(series("baro", t, rng.normal(0, 0.1, t.size)), replace(gps2, value=resting))
+    )
+    assert next(s for s in still.sensors if s.name == "gps2").dropped == {}
+
+
+def test_the_stuck_gps2_of_a_real_log_is_dropped_and_the_fusion_stays_with_the_others() -> None:
+    """diaven_sample01: GPS2 reports 0.00 m with a 3D fix for 68 s, then 43 m."""
+    log = shared_log("ardupilot/diaven_sample01.bin")
+    run = fuse_log(log)
+    gps2 = next(s for s in run.log.sensors if s.name == "gps2")
+    assert gps2.dropped == {STUCK: 340}
+    assert gps2.value.min() > 40.0
+    h, names = run.referred.h, run.referred.names
+    others = h[:, [i for i, n in enumerate(names) if n != "gps2"]]
+    beyond = np.maximum(np.nanmin(others, axis=1) - run.result.fused,
+                        run.result.fused - np.nanmax(others, axis=1))  # fmt: skip
+    assert np.nanmax(beyond) <= 2.0  # measured: 0.0 (before: 5-11 m off, the 0.00 m datum)
+    assert damage(run.log) == (
+        "diaven_sample01.bin: 38 bytes skipped (not part of any decodable record); "
+        "2541 implausible samples dropped (gps2 340, rangefinder 2201)"
+    )
+
+
+def test_rangefinder_readings_below_its_minimum_range_are_not_samples() -> None:
+    t = np.arange(0.0, 30.0, 0.05)
+    v = np.where(t < 10, 0.2, 0.1 + np.interp(t, [10, 30], [0, 5]))  # landed, then a climb
+    rangefinder = Series("rangefinder", "rangefinder", "RFND.Dist", "ground", t, v)
+    params = {"RNGFND1_MIN_CM": 20.0, "RNGFND1_GNDCLEAR": 10.0}
+    out = screen(_log(rangefinder, params=params)).sensors[0]
+    assert out.dropped == {BELOW_MINIMUM: int((v <= 0.205).sum())}
+    assert out.value.min() > 0.2
+    # CTUN.SAlt is the autopilot's own, past the driver's limits
+    ctun = replace(rangefinder, source="CTUN.SAlt")
+    assert screen(_log(ctun, params=params)).sensors[0].dropped == {}

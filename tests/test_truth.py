@@ -83,3 +83,18 @@ def test_the_305_m_climb_barometer_scale_is_found_and_fused_right() -> None:
     before = {r.name: r.overall for r in offset.rows}
     assert before["mean"].rmse > 4.0  # measured 4.49 m
     assert before["baro"].max_abs > 15.0
+
+
+@pytest.mark.parametrize(
+    "name", ["copter_3.7dev_maikbasso_sonar_10m.BIN", "copter_4.5.0dev_skyrats_rfnd_8m.BIN"]
+)
+def test_a_sonar_reading_its_minimum_on_the_ground_is_referred_by_its_clearance(
+    name: str,
+) -> None:
+    """On the ground these sonars read 0.20 m, their RNGFND*_MIN_CM, where RNGFND*_GNDCLEAR
+    says 0.10 m: those readings are dropped and the datum is the clearance."""
+    result = evaluate(shared_log(f"truth/{name}"), ["mean"])
+    offset = next(o for o in result.prepared.referred.offsets if o.name == "rangefinder")
+    assert offset.offset_m == pytest.approx(0.10)
+    rangefinder = next(r for r in result.rows if r.name == "rangefinder").overall
+    assert rangefinder.rmse < 0.03  # matched in flight to the barometer before: 0.16-0.18 m

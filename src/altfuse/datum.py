@@ -33,7 +33,7 @@ tilt-corrected by the autopilot and is left alone).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Literal
 
@@ -85,7 +85,7 @@ class Offset:
     name: str
     offset_m: float
     method: str
-    window_s: tuple[float, float]
+    window_s: tuple[float, float] | None  # None: not measured (a rangefinder's clearance)
     ticks: int
     scale: float = 1.0
     scale_std: float | None = None
@@ -105,12 +105,15 @@ class Scale:
 
 @dataclass(frozen=True)
 class _Ground:
-    """Where the offsets are measured: the ground window (or the log's first seconds)."""
+    """Where the offsets are measured: the ground window (or the log's first seconds), and
+    what rangefinders read when landed [m], by name, for those with no sample there."""
 
     window: npt.NDArray[np.bool_]
     how: str
     seconds: float
     ref: int
+    clearances: Mapping[str, float]
+    takeoff: bool
 
 
 @dataclass(frozen=True)
@@ -146,13 +149,12 @@ def tilt_correct(series: Series, attitude: Attitude | None) -> Series:
     samples outside its time range are dropped, counted in ``dropped``). Without attitude the
     series is returned unchanged, and its datum says so.
     """
-    if series.kind != "rangefinder" or not series.source.startswith(("RFND", "SONR")):
+    if not series.is_raw_rangefinder:
         return series
     if attitude is None or attitude.t.size < 2:
         return replace(series, datum=f"{series.datum} (not tilt-corrected: no attitude)")
     inside = (series.t >= attitude.t[0]) & (series.t <= attitude.t[-1])
-    roll = np.interp(series.t[inside], attitude.t, attitude.roll)
-    pitch = np.interp(series.t[inside], attitude.t, attitude.pitch)
+    roll, pitch = attitude.roll_pitch_at(series.t[inside])
     dropped = dict(series.dropped)
     if (~inside).any():
         dropped["outside the attitude's time range"] = int((~inside).sum())
@@ -206,6 +208,7 @@ def refer_to_takeoff(
     ground_window_s: float = 5.0,
     takeoff_climb_m: float = 1.0,
     referral: Referral = "full",
+    clearances: Mapping[str, float] | None = None,
 ) -> Referred:
     """Subtract from each source its offset to height above take-off (see module doc).
 
@@ -220,6 +223,10 @@ def refer_to_takeoff(
     referral
         ``full``: each barometer's scale too, where the flight can tell it (:func:`baro_scales`);
         ``offset``: offsets only.
+    clearances
+        What a rangefinder reads when landed [m] by name (``RNGFNDn_GNDCLEAR``): its offset
+        when it has no valid reading in the ground window (its ground readings below its
+        minimum range), rather than one matched in flight to a barometer that may drift.
     """
     ground_s, climb_m = ground_window_s, takeoff_climb_m
     t, z = aligned.t, aligned.z
@@ -242,7 +249,9 @@ def refer_to_takeoff(
     win_idx = np.flatnonzero(window & ref_valid)
     ground_window = (float(t[win_idx[0]]), float(t[win_idx[-1]]))
 
-    ground = _Ground(window, ground_how, ground_s, ref)
+    ground = _Ground(
+        window, ground_how, ground_s, ref, dict(clearances or {}), ground_how.startswith("ground")
+    )
     offsets, h, dropped = _refer(aligned, ground, {})
     if referral == "full":
         scales = baro_scales(aligned, h, offsets)
@@ -282,6 +291,12 @@ def _refer(
         on_ground = ground.window & valid
         if on_ground.sum() >= MIN_WINDOW_TICKS or (i == ref and on_ground.any()):
             sel, base, how = on_ground, np.zeros_like(t), f"median over the {ground.how}"
+        elif name in ground.clearances and ground.takeoff:
+            clearance = ground.clearances[name]
+            how = f"its ground clearance, {clearance:.2f} m (no valid reading on the ground)"
+            offsets[i] = Offset(name, clearance, how, None, 0)
+            h[:, i] = z[:, i] - clearance
+            continue
         else:
             sel = _first_seconds(valid & np.isfinite(h[:, ref]), t, ground.seconds)
             if sel.sum() < MIN_WINDOW_TICKS:

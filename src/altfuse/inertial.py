@@ -71,8 +71,7 @@ def vertical_acceleration(imu: Imu, attitude: Attitude) -> tuple[FloatArray, Flo
     inside = (imu.t >= attitude.t[0]) & (imu.t <= attitude.t[-1])
     t = imu.t[inside]
     f = imu.acc[inside]
-    roll = np.interp(t, attitude.t, attitude.roll)
-    pitch = np.interp(t, attitude.t, attitude.pitch)
+    roll, pitch = attitude.roll_pitch_at(t)
     f_down = -np.sin(pitch) * f[:, 0] + np.sin(roll) * np.cos(pitch) * f[:, 1]
     f_down += np.cos(roll) * np.cos(pitch) * f[:, 2]
     return t, -f_down - G

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -12,6 +13,17 @@ from altfuse.model import FloatArray
 #: The standard deviation of a normal variable over its median absolute deviation (or, for one
 #: centred on zero, over the median of its absolute value): 1 / Phi^-1(3/4) = 1.4826.
 MAD_TO_SIGMA = 1.0 / 0.6744897501960817
+
+
+def mad_sigma(x: FloatArray) -> float:
+    """The standard deviation of normal ``x`` from its median absolute deviation."""
+    return MAD_TO_SIGMA * float(np.median(np.abs(x - np.median(x))))
+
+
+def white_noise_sigma(z: FloatArray) -> float:
+    """The white noise of samples ``z`` [their unit] from their second differences
+    (``sigma = 1.4826 MAD(d2 z) / sqrt(6)``): a smooth signal cancels there, noise survives."""
+    return mad_sigma(np.diff(z, 2)) / math.sqrt(6.0)
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ FloatArray = npt.NDArray[np.float64]
 SensorKind = Literal["baro", "gps", "rangefinder"]
 SENSOR_KINDS: tuple[SensorKind, ...] = get_args(SensorKind)
 #: What a series is: an altitude source, or a reference, speed or temperature beside them.
-SeriesKind = Literal[SensorKind, "reference", "speed", "temperature"]
+SeriesKind = Literal[SensorKind, "reference", "speed", "velocity", "temperature"]
 
 
 def sensor_kind(kind: SeriesKind) -> SensorKind:
@@ -69,6 +69,12 @@ class Series:
         if self.t.shape != self.value.shape:
             raise ValueError(f"{self.name}: {self.t.shape} times for {self.value.shape} values")
 
+    @property
+    def is_raw_rangefinder(self) -> bool:
+        """A rangefinder's own distance along the body's down axis (``RFND``, ``SONR``), not the
+        autopilot's tilt-corrected ``CTUN.SAlt``: its driver's limits and clearance apply."""
+        return self.kind == "rangefinder" and self.source.startswith(("RFND", "SONR"))
+
 
 @dataclass(frozen=True)
 class Imu:
@@ -80,6 +86,18 @@ class Imu:
 
 
 @dataclass(frozen=True)
+class Vibration:
+    """The accelerometer's quality as the autopilot logs it (VIBE) for the first IMU: the
+    vibration levels [m/s²] (the standard deviation of the high-passed acceleration per axis)
+    and the cumulative count of samples that clipped at the sensor's range."""
+
+    source: str
+    t: FloatArray
+    level: FloatArray  # shape (n, 3): X, Y, Z
+    clips: FloatArray  # cumulative count
+
+
+@dataclass(frozen=True)
 class Attitude:
     """Vehicle attitude [rad], ZYX Euler angles as ArduPilot logs them in ATT."""
 
@@ -88,6 +106,13 @@ class Attitude:
     roll: FloatArray
     pitch: FloatArray
     yaw: FloatArray
+
+    def roll_pitch_at(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Roll and pitch [rad] at times ``t``, interpolated on the unwrapped angles: a roll
+        from +179 deg to -179 deg turns 2 deg, not 358 deg back through level."""
+        roll = np.interp(t, self.t, np.unwrap(self.roll))
+        pitch = np.interp(t, self.t, np.unwrap(self.pitch))
+        return roll, pitch
 
 
 @dataclass(frozen=True)
@@ -113,4 +138,6 @@ class FlightLog:
     dropped_sources: dict[str, str] = field(default_factory=dict)
     params: dict[str, float] = field(default_factory=dict)
     ground_speed: Series | None = None  # horizontal speed [m/s], kind "speed"
+    vertical_velocity: Series | None = None  # a GPS's vertical velocity up [m/s], "velocity"
+    vibration: Vibration | None = None
     temperatures: dict[str, Series] = field(default_factory=dict)  # [degC] by sensor name

@@ -20,7 +20,7 @@ from altfuse.inertial import referred_vertical_acceleration
 from altfuse.io import read_log
 from altfuse.model import FlightLog, Samples, Series
 from altfuse.params import Params, param, validate
-from altfuse.screen import screen
+from altfuse.screen import rangefinder_param, screen
 
 log = logging.getLogger(__name__)
 
@@ -137,7 +137,11 @@ def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     aligned = align(sensors, options.rate_hz, options.max_gap_s, options.span)
     aligned_at = time.perf_counter()
     referred = refer_to_takeoff(
-        aligned, options.ground_window_s, options.takeoff_climb_m, options.referral
+        aligned,
+        options.ground_window_s,
+        options.takeoff_climb_m,
+        options.referral,
+        ground_clearances(flight),
     )
     log.info(
         "%s: aligned %d ticks in %.2f s, datum in %.2f s",
@@ -149,6 +153,17 @@ def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     dropped.update(referred.dropped)
     _require_sensors(name, referred.names, options, dropped)
     return Prepared(flight, sensors, aligned, referred, dropped, lags)
+
+
+def ground_clearances(flight: FlightLog) -> dict[str, float]:
+    """What each raw rangefinder distance reads when landed [m] (``RNGFNDn_GNDCLEAR``)."""
+    out = {}
+    for s in flight.sensors:
+        if s.is_raw_rangefinder:
+            cm = rangefinder_param(flight.params, s.name, "GNDCLEAR")
+            if cm is not None and cm >= 0:
+                out[s.name] = cm / 100.0
+    return out
 
 
 def _samples(series: Series | None) -> Samples | None:
@@ -179,6 +194,13 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
             f"the log has no {' or '.join(missing)} records; {others} work without it"
         )
     temps = flight.temperatures
+    velocity = _samples(flight.vertical_velocity)
+    if velocity is not None and "gps" in prepared.lags:
+        velocity = Samples(velocity.t - prepared.lags["gps"].lag_s, velocity.value)
+    imu_rate = None
+    if flight.imu is not None and flight.imu.t.size > 1:
+        step = float(np.median(np.diff(flight.imu.t)))
+        imu_rate = 1.0 / step if step > 0 else None
     return FusionInput(
         t=referred.t,
         z=referred.h,
@@ -190,6 +212,9 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         speed=_samples(flight.ground_speed),
         temperatures=tuple(_samples(temps.get(n)) for n in referred.names),
         accel=accel,
+        gps_velocity_up=velocity,
+        vibration=flight.vibration,
+        imu_rate_hz=imu_rate,
     )
 
 
@@ -279,7 +304,7 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
                     "sensor": o.name,
                     "offset_m": o.offset_m,
                     "method": o.method,
-                    "window_s": list(o.window_s),
+                    "window_s": list(o.window_s) if o.window_s else None,
                     "ticks": o.ticks,
                     "scale": o.scale,
                     "scale_std": o.scale_std,

@@ -14,11 +14,18 @@ RFND Stat) come first; these checks come after, on each source:
   -1,000..12,000 m, rangefinder outside 0..1,000 m;
 - **rangefinder out-of-range codes**: exactly 0 or 655.35 m (the uint16 centimetre maximum);
 - **rangefinder pinned at its maximum**: drivers that log their maximum range (or max + 1 m) when
-  they see nothing, with ``Stat`` Good: when the log holds ``RNGFND1_MAX_CM``/``RNGFND_MAX_CM``,
+  they see nothing, with ``Stat`` Good: when the log holds the instance's ``RNGFNDn_MAX_CM``,
   samples at or above that maximum; otherwise samples equal to the series' own maximum when that
   value repeats in at least ``PINNED_MIN_SAMPLES`` samples;
+- **rangefinder below its minimum range**: a distance at or below the instance's
+  ``RNGFNDn_MIN_CM`` is the driver's floor, not a measurement (a rangefinder on the ground
+  reads 20 cm where its ``RNGFNDn_GNDCLEAR`` says 10 cm);
 - **spikes**: a sample more than ``SPIKE_MIN_M`` away from both neighbours, in the same direction,
-  and faster than ``MAX_VERTICAL_SPEED_M_S`` to reach from either: no aircraft does that.
+  and faster than ``MAX_VERTICAL_SPEED_M_S`` to reach from either: no aircraft does that;
+- **stuck at one value**: the same value to the bit for ``STUCK_MIN_S`` seconds or more
+  (``STUCK_MIN_SAMPLES`` samples) while another source moved more than its noise and
+  ``MOTION_MIN_M``: a receiver that reports 0.00 m with a 3D fix, a frozen driver. A sensor at
+  rest on the ground, as every source in a simulator, is not stuck while the others rest too.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from altfuse.metrics import white_noise_sigma
 from altfuse.model import FlightLog, FloatArray, Series
 
 Mask = npt.NDArray[np.bool_]
@@ -39,7 +47,9 @@ ENVELOPE = "outside the plausible altitude envelope"
 CODE = "rangefinder out-of-range code (0 or 655.35 m)"
 PINNED = "rangefinder pinned at its maximum"
 SPIKE = "spike (faster than 50 m/s to both neighbours)"
-REASONS = (BACKWARDS, OUTSIDE_LOG, ENVELOPE, CODE, PINNED, SPIKE)
+BELOW_MINIMUM = "rangefinder at or below its minimum range"
+STUCK = "stuck at one value while the others moved"
+REASONS = (BACKWARDS, OUTSIDE_LOG, ENVELOPE, CODE, PINNED, SPIKE, BELOW_MINIMUM, STUCK)
 
 ENVELOPE_M = {
     "gps": (-500.0, 12_000.0),
@@ -51,7 +61,19 @@ PINNED_MIN_SAMPLES = 10
 SPIKE_MIN_M = 10.0
 MAX_VERTICAL_SPEED_M_S = 50.0
 TIME_MARGIN_MIN_S = 600.0
-RANGEFINDER_MAX_PARAMS = ("RNGFND1_MAX_CM", "RNGFND_MAX_CM")
+STUCK_MIN_S = 5.0
+STUCK_MIN_SAMPLES = 10
+MOTION_MIN_M = 1.0
+#: Another source "moved" when its spread over the run exceeds this many times its noise.
+MOTION_NOISES = 10.0
+
+
+def rangefinder_param(params: dict[str, float], name: str, suffix: str) -> float | None:
+    """A rangefinder instance's parameter (``RNGFND1_MIN_CM`` for ``rangefinder``,
+    ``RNGFND2_...`` for ``rangefinder2``; Copter 3.x names the first ``RNGFND_...``), or None."""
+    number = name.removeprefix("rangefinder") or "1"
+    keys = [f"RNGFND{number}_{suffix}"] + ([f"RNGFND_{suffix}"] if number == "1" else [])
+    return next((params[k] for k in keys if k in params), None)
 
 
 def log_span(series: tuple[Series, ...]) -> tuple[float, float] | None:
@@ -102,8 +124,19 @@ def _pinned(v: FloatArray, configured_max_m: float | None) -> Mask:
     return at_top if at_top.sum() >= PINNED_MIN_SAMPLES else np.zeros(v.size, dtype=bool)
 
 
+def _rangefinder_codes(v: FloatArray, minimum_m: float | None) -> list[tuple[str, Mask]]:
+    """A rangefinder's out-of-range codes, and its readings at or below its minimum range."""
+    checks = [(CODE, np.isin(np.round(v, 2), RANGEFINDER_CODES_M))]
+    if minimum_m is not None:
+        checks.append((BELOW_MINIMUM, v <= minimum_m + 0.005))
+    return checks
+
+
 def screen_series(
-    s: Series, span: tuple[float, float] | None, rangefinder_max_m: float | None = None
+    s: Series,
+    span: tuple[float, float] | None,
+    rangefinder_max_m: float | None = None,
+    rangefinder_min_m: float | None = None,
 ) -> Series:
     """``s`` without its impossible samples; ``dropped`` counts them by reason."""
     checks: list[tuple[str, Mask]] = []
@@ -113,7 +146,7 @@ def screen_series(
     lo, hi = ENVELOPE_M.get(s.kind, (-np.inf, np.inf))
     checks.append((ENVELOPE, (s.value < lo) | (s.value > hi)))
     if s.kind == "rangefinder":
-        checks.append((CODE, np.isin(np.round(s.value, 2), RANGEFINDER_CODES_M)))
+        checks += _rangefinder_codes(s.value, rangefinder_min_m)
     keep = np.ones(s.t.size, dtype=bool)
     dropped = dict(s.dropped)
     for reason, bad in checks:
@@ -139,14 +172,53 @@ def screen_series(
     return replace(s, t=s.t[keep], value=s.value[keep], dropped=dropped)
 
 
+def _range_limit(flight: FlightLog, s: Series, suffix: str) -> float | None:
+    """A raw rangefinder distance's configured limit [m] (CTUN.SAlt is the autopilot's own)."""
+    if not s.is_raw_rangefinder:
+        return None
+    cm = rangefinder_param(flight.params, s.name, suffix)
+    return cm / 100.0 if cm and cm > 0 else None
+
+
+def _stuck(s: Series, others: list[Series]) -> Mask:
+    """The samples of ``s`` in runs of one value over ``STUCK_MIN_S`` while another moved."""
+    out = np.zeros(s.t.size, dtype=bool)
+    if s.t.size < STUCK_MIN_SAMPLES:
+        return out
+    change = np.flatnonzero(np.diff(s.value) != 0) + 1
+    starts = np.concatenate(([0], change))
+    ends = np.concatenate((change, [s.t.size]))
+    for a, b in zip(starts, ends, strict=True):
+        if b - a < STUCK_MIN_SAMPLES or s.t[b - 1] - s.t[a] < STUCK_MIN_S:
+            continue
+        lo, hi = s.t[a], s.t[b - 1]
+        for o in others:
+            v = o.value[(o.t >= lo) & (o.t <= hi)]
+            if v.size < 5:
+                continue
+            moved = float(np.ptp(np.percentile(v, [5, 95])))
+            if moved > max(MOTION_MIN_M, MOTION_NOISES * white_noise_sigma(v)):
+                out[a:b] = True
+                break
+    return out
+
+
 def screen(flight: FlightLog) -> FlightLog:
     """``flight`` with every source screened (see the module doc); empty sources dropped."""
     span = log_span(flight.sensors)
-    max_cm = next((flight.params[p] for p in RANGEFINDER_MAX_PARAMS if p in flight.params), None)
-    rangefinder_max_m = max_cm / 100.0 if max_cm and max_cm > 0 else None
+    screened_all = [
+        screen_series(s, span, _range_limit(flight, s, "MAX_CM"), _range_limit(flight, s, "MIN_CM"))
+        for s in flight.sensors
+    ]
+    with_stuck = []
+    for s in screened_all:
+        stuck = _stuck(s, [o for o in screened_all if o.name != s.name])
+        if stuck.any():
+            dropped = dict(s.dropped, **{STUCK: int(stuck.sum())})
+            s = replace(s, t=s.t[~stuck], value=s.value[~stuck], dropped=dropped)
+        with_stuck.append(s)
     sensors, dropped_sources = [], dict(flight.dropped_sources)
-    for s in flight.sensors:
-        screened = screen_series(s, span, rangefinder_max_m)
+    for s, screened in zip(flight.sensors, with_stuck, strict=True):
         if screened.t.size:
             sensors.append(screened)
         else:

@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from altfuse.inertial import VerticalAcceleration
-from altfuse.model import FloatArray, Samples, SensorKind
+from altfuse.model import FloatArray, Samples, SensorKind, Vibration
 from altfuse.params import Params
 
 #: Per-tick status of the fused value.
@@ -52,6 +52,12 @@ class FusionInput:
     accel
         The vertical acceleration, for a method that ``uses`` ``"accel"``; None otherwise and
         when the log has no IMU or attitude.
+    gps_velocity_up
+        The first GPS's vertical velocity [m/s, up] samples, moved by that GPS's lag; None if
+        the log has none.
+    vibration, imu_rate_hz
+        The accelerometer's logged vibration and clipping (VIBE), and the rate [Hz] at which
+        its samples are logged: how far to trust it; None if the log cannot tell.
     """
 
     t: FloatArray
@@ -64,6 +70,9 @@ class FusionInput:
     speed: Samples | None = None
     temperatures: tuple[Samples | None, ...] = ()
     accel: VerticalAcceleration | None = None
+    gps_velocity_up: Samples | None = None
+    vibration: Vibration | None = None
+    imu_rate_hz: float | None = None
 
     def __post_init__(self) -> None:
         n = self.z.shape[1] if self.z.ndim == 2 else -1

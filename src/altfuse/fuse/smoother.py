@@ -101,7 +101,7 @@ import numpy as np
 import pandas as pd
 
 from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult
-from altfuse.metrics import MAD_TO_SIGMA
+from altfuse.metrics import MAD_TO_SIGMA, mad_sigma, white_noise_sigma
 from altfuse.model import FloatArray, Samples
 from altfuse.params import InvalidParameter, Params, param
 
@@ -165,16 +165,11 @@ class SmootherParams(Params):
     )
 
 
-def _mad_sigma(x: FloatArray) -> float:
-    """The standard deviation of normal ``x`` from its median absolute deviation."""
-    return MAD_TO_SIGMA * float(np.median(np.abs(x - np.median(x))))
-
-
 def measurement_sigma(z: FloatArray) -> float:
     """Noise of one sensor [m] from the median absolute second difference of its samples."""
     if z.size < 5:
         return 1.0
-    return max(_mad_sigma(np.diff(z, 2)) / math.sqrt(6.0), _MIN_SIGMA_M)
+    return max(white_noise_sigma(z), _MIN_SIGMA_M)
 
 
 def accel_psd(t: FloatArray, a: FloatArray) -> float:
@@ -183,7 +178,7 @@ def accel_psd(t: FloatArray, a: FloatArray) -> float:
     ``Q_ACCEL_MIN`` (vibration and attitude errors the spread does not show)."""
     if a.size < 10:
         return Q_ACCEL
-    sigma = _mad_sigma(np.diff(a)) / math.sqrt(2.0)
+    sigma = mad_sigma(np.diff(a)) / math.sqrt(2.0)
     return max(sigma**2 * float(np.median(np.diff(t))), Q_ACCEL_MIN)
 
 

@@ -43,13 +43,23 @@ from pymavlink.DFReader import FORMAT_TO_STRUCT
 from altfuse.errors import LogReadError
 from altfuse.io import sha256_of
 from altfuse.io.fastdf import Index, _text, index_file
-from altfuse.model import Attitude, FlightLog, FloatArray, Imu, SensorKind, Series
+from altfuse.model import (
+    Attitude,
+    FlightLog,
+    FloatArray,
+    Imu,
+    SensorKind,
+    Series,
+    SeriesKind,
+    Vibration,
+)
 
 log = logging.getLogger(__name__)
 
 _SENSOR_TYPES = ("GPS", "GPS2", "GPS3", "BARO", "BAR2", "BAR3", "RFND", "SONR", "CTUN")
 _OTHER_TYPES = (
     "IMU", "ATT", "XKF1", "NKF1", "ORGN", "AHR2", "POS", "SIM", "MSG", "VER", "FMTU", "PARM",
+    "VIBE",
 )  # fmt: skip
 WANTED_TYPES = frozenset(_SENSOR_TYPES + _OTHER_TYPES)
 
@@ -468,21 +478,43 @@ def _read_references(rec: _Records) -> list[Series]:
     return [c for c in candidates if c is not None]
 
 
-def _read_ground_speed(rec: _Records) -> Series | None:
-    """Horizontal speed over ground [m/s] from the first GPS instance with a 3D fix."""
+def _read_gps_field(rec: _Records, col: str, sign: float = 1.0) -> Series | None:
+    """``sign`` times ``col`` [m/s] of the first GPS instance with a 3D fix: its horizontal
+    speed over ground (``Spd``), or its vertical velocity up (``-VZ``: ArduPilot logs it down)."""
+    meaning: dict[str, tuple[str, SeriesKind, str]] = {
+        "Spd": ("ground_speed", "speed", "horizontal"),
+        "VZ": ("gps_velocity_up", "velocity", "up"),
+    }
+    name, kind, datum = meaning[col]
     for type_name in ("GPS", "GPS2", "GPS3"):
-        if not rec.timed(type_name, "Spd", "Status"):
+        if not rec.timed(type_name, col, "Status"):
             continue
         select = rec.raw(type_name, "Status") >= 3
         if rec.has(type_name, "I"):
             select &= rec.raw(type_name, "I") == 0
-        t, v = rec.times(type_name)[select], rec.column(type_name, "Spd")[select]
-        keep = np.isfinite(t) & np.isfinite(v) & (v >= 0)
+        t, v = rec.times(type_name)[select], sign * rec.column(type_name, col)[select]
+        keep = np.isfinite(t) & np.isfinite(v) & ((v >= 0) if col == "Spd" else True)
         if keep.any():
-            return Series(
-                "ground_speed", "speed", f"{type_name}.Spd", "horizontal", t[keep], v[keep]
-            )
+            source = f"{type_name}.{'-' if sign < 0 else ''}{col}"
+            return Series(name, kind, source, datum, t[keep], v[keep])
     return None
+
+
+def _read_vibration(rec: _Records) -> Vibration | None:
+    """The first IMU's vibration levels and cumulative clip count (VIBE: ``IMU`` and ``Clip``
+    since Copter 4.0, ``Clip0`` before)."""
+    if not rec.timed("VIBE", "VibeX", "VibeY", "VibeZ"):
+        return None
+    select = np.ones(rec.n("VIBE"), dtype=bool)
+    if rec.has("VIBE", "IMU"):
+        select = rec.raw("VIBE", "IMU") == 0
+    clip = next((c for c in ("Clip", "Clip0") if rec.has("VIBE", c)), None)
+    if clip is None:
+        return None
+    level = np.column_stack([rec.column("VIBE", c)[select] for c in ("VibeX", "VibeY", "VibeZ")])
+    return Vibration(
+        f"VIBE[0].{clip}", rec.times("VIBE")[select], level, rec.raw("VIBE", clip)[select]
+    )
 
 
 def _read_imu(rec: _Records) -> Imu | None:
@@ -549,7 +581,9 @@ def read_dataflash(path: str | Path) -> FlightLog:
         notes=tuple(b.notes),
         dropped_sources=b.dropped_sources,
         params=_params(rec),
-        ground_speed=_read_ground_speed(rec),
+        ground_speed=_read_gps_field(rec, "Spd"),
+        vertical_velocity=_read_gps_field(rec, "VZ", sign=-1.0),
+        vibration=_read_vibration(rec),
         temperatures=b.temperatures,
     )
 
