@@ -13,6 +13,7 @@ from altfuse.align import (
     merge_duplicates,
     resample,
     shift,
+    splices,
 )
 from altfuse.errors import NoUsableSensorsError
 from altfuse.model import Series
@@ -138,3 +139,13 @@ def test_no_lag_where_the_reference_explains_too_little() -> None:
     assert lag.lag_s == 0.0
     assert lag.how.startswith("not estimated: baro explains")
     assert gps_lags([gps]) == {}  # no barometer, no lag
+
+
+def test_a_pause_in_every_sensor_and_the_accelerometer_splits_the_log() -> None:
+    t = np.concatenate([np.arange(0.0, 50.0, 0.1), np.arange(70.0, 120.0, 0.1)])
+    aligned = align([series("baro", t, np.ones(t.size)), series("gps", t, np.ones(t.size), "gps")])
+    assert splices(aligned, None) == [pytest.approx(70.0)]
+    imu_through = np.arange(0.0, 120.0, 0.02)
+    assert splices(aligned, imu_through) == []  # the accelerometer saw the pause: one flight
+    imu_paused = imu_through[(imu_through < 50.0) | (imu_through >= 70.0)]
+    assert splices(aligned, imu_paused) == [pytest.approx(70.0)]

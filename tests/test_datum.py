@@ -174,3 +174,40 @@ def test_a_rangefinder_without_ground_readings_takes_its_ground_clearance() -> N
     assert rangefinder.method.startswith("its ground clearance, 0.20 m")
     assert rangefinder.window_s is None
     np.testing.assert_allclose(ref.h[:, 2][np.isfinite(ref.h[:, 2])], h[250:], atol=0.1)
+
+
+def two_flights(second_takes_off: bool) -> tuple[Aligned, np.ndarray]:
+    """Two 80 s flights from the same ground, 30 s apart with nothing logged between (a
+    reboot): the barometer recalibrates to 0 on the second boot, 3 m below its first zero; the
+    second part starts in flight when it does not take off."""
+    rng = np.random.default_rng(6)
+    t = np.arange(0.0, 190.0, 0.1)
+    h = np.interp(
+        t, [0, 20, 40, 60, 80, 110, 130, 150, 170, 190], [0, 0, 10, 10, 0, 0, 0, 10, 10, 0]
+    )
+    if not second_takes_off:
+        h[t >= 110] = 10.0
+    baro = np.where(t < 110, 3.0 + h, h) + rng.normal(0, 0.05, t.size)
+    gps = 400 + h + rng.normal(0, 0.3, t.size)
+    z = np.column_stack([gps, baro])
+    z[(t > 80) & (t < 110)] = np.nan
+    names = ("gps", "baro")
+    return Aligned(t, names, names, z, 10.0, 1.0, "union", {}), h
+
+
+def test_each_segment_of_a_spliced_log_with_a_take_off_gets_its_own_datum() -> None:
+    aligned, h = two_flights(second_takes_off=True)
+    ref = refer_to_takeoff(aligned, splices=[110.0])
+    assert [s.datum.split(",")[0] for s in ref.segments] == ["the main segment's", "its own"]
+    assert ref.segments[1].start_s == pytest.approx(110.0)
+    error = ref.h[:, 1] - h
+    assert np.nanmax(np.abs(error)) < 0.3  # one datum: 3 m off after the reboot
+    one = refer_to_takeoff(aligned)
+    assert np.nanmax(np.abs(one.h[:, 1] - h)) > 2.5
+
+
+def test_a_segment_resumed_in_flight_keeps_the_main_datum() -> None:
+    aligned, _ = two_flights(second_takes_off=False)
+    ref = refer_to_takeoff(aligned, splices=[110.0])
+    assert ref.segments[1].datum == "the main segment's offsets (no take-off in it)"
+    np.testing.assert_allclose(ref.h[:, 0], refer_to_takeoff(aligned).h[:, 0])  # the GPS

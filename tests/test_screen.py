@@ -225,3 +225,15 @@ def test_rangefinder_readings_below_its_minimum_range_are_not_samples() -> None:
     # CTUN.SAlt is the autopilot's own, past the driver's limits
     ctun = replace(rangefinder, source="CTUN.SAlt")
     assert screen(_log(ctun, params=params)).sensors[0].dropped == {}
+
+
+def test_the_references_are_screened_like_the_sensors() -> None:
+    t = np.arange(0.0, 100.0, 0.1)
+    truth = Series("sim", "reference", "SIM.Alt", "AMSL", t.copy(), 500 + np.sin(t / 10))
+    t_bad = truth.t.copy()
+    t_bad[500] = 3.0  # one record whose clock stepped back
+    baro = series("baro", t, np.sin(t / 10))
+    flight = replace(_log(baro), references=(replace(truth, t=t_bad),))
+    sim = screen(flight).references[0]
+    assert sim.dropped == {BACKWARDS: 1}
+    assert np.all(np.diff(sim.t) > 0)

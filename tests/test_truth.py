@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 from pymavlink import DFReader
 
 from altfuse.align import estimate_lag
+from altfuse.cli import cli
 from altfuse.evaluation import evaluate
 from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, fuse_log, prepare_log
@@ -98,3 +100,18 @@ def test_a_sonar_reading_its_minimum_on_the_ground_is_referred_by_its_clearance(
     assert offset.offset_m == pytest.approx(0.10)
     rangefinder = next(r for r in result.rows if r.name == "rangefinder").overall
     assert rangefinder.rmse < 0.03  # matched in flight to the barometer before: 0.16-0.18 m
+
+
+def test_info_shows_the_clock_fix_the_lag_the_scale_and_the_segments() -> None:
+    path = shared_log("truth/copter_3.4dev-solo_djnugent_climb154m_ekf1.BIN")
+    result = CliRunner().invoke(cli, ["info", str(path)])
+    assert result.exit_code == 0, result.output
+    text = result.stdout
+    assert "note: GPS time from GPS.T, the boot time" in text
+    assert "gps          lag 0.20 s" in text
+    assert "scale 1.05" in text
+    # the log stops at 72.1 s (descending, 20 m up) and resumes on the ground at 88.2 s
+    assert "segment 21.1-72.1 s: datum its own, ground before take-off" in text
+    assert "segment 88.2-251.7 s: datum the main segment's" in text
+    meta = fuse_log(path).provenance["datum"]
+    assert [s["start_s"] for s in meta["segments"]] == [21.1, 88.2]

@@ -60,6 +60,10 @@ class Aligned:
     span: Span
     stats: dict[str, AlignStats]
 
+    def part(self, start: int, stop: int) -> Aligned:
+        """The ticks ``start:stop`` of the clock, every source on them."""
+        return replace(self, t=self.t[start:stop], z=self.z[start:stop])
+
 
 def merge_duplicates(t: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Sort by time and replace samples sharing a timestamp by their mean."""
@@ -292,3 +296,21 @@ def gps_lags(series: Sequence[Series]) -> dict[str, Lag]:
 def shift(series: Series, lag: Lag) -> Series:
     """``series`` with its sample times moved ``lag.lag_s`` earlier."""
     return series if lag.lag_s == 0 else replace(series, t=series.t - lag.lag_s)
+
+
+#: A pause in every altitude source at least this long [s], with no accelerometer sample in it
+#: either, is a splice: the log stopped and resumed (a reboot, a disarmed pause, a log that
+#: was cut and joined), and nothing says where the vehicle went meanwhile.
+SPLICE_MIN_GAP_S = 5.0
+
+
+def splices(aligned: Aligned, inertial_t: FloatArray | None) -> list[float]:
+    """The times [s] at which a new segment of the log starts (see ``SPLICE_MIN_GAP_S``)."""
+    t = aligned.t[np.isfinite(aligned.z).any(axis=1)]
+    gaps = np.flatnonzero(np.diff(t) >= SPLICE_MIN_GAP_S)
+    out = []
+    for g in gaps:
+        lo, hi = t[g] + 1.0, t[g + 1] - 1.0  # the clock's cells and the IMU's last samples
+        if inertial_t is None or not ((inertial_t > lo) & (inertial_t < hi)).any():
+            out.append(float(t[g + 1]))
+    return out

@@ -27,14 +27,13 @@ from altfuse.errors import AltfuseError, ParameterError
 from altfuse.evaluation import TRUTHS, TruthChoice, evaluation_table
 from altfuse.evaluation import evaluate as evaluate_log
 from altfuse.fuse import METHODS, params_by_method
-from altfuse.info import damage, describe
+from altfuse.info import as_text, damage, describe
 from altfuse.io import read_log
 from altfuse.job import Outputs, fuse_to_files
 from altfuse.metrics import ErrorStats
 from altfuse.params import UNIT_SUFFIXES, InvalidParameter, fields, flag_of, hints, unit_of
 from altfuse.pipeline import FuseOptions
 from altfuse.plot import check_plot_path, run_figure, writer
-from altfuse.screen import screen
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
 from altfuse.write import atomic_outputs, write_json
 
@@ -555,48 +554,12 @@ def info(log: Path, as_json: bool) -> None:
       altfuse info flight.bin
       altfuse info flight.bin --json
     """
-    summary = describe(screen(read_log(log)))
+    summary = describe(read_log(log))
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return
-    click.echo(
-        f"{summary['file']}: {summary['vehicle']} ({summary['firmware']}), "
-        f"{summary['size_bytes']} bytes, sensors over {summary['duration_s']:.1f} s"
-    )
-    click.echo("altitude sources:")
-    for s in summary["sensors"]:
-        rate = f"{s['rate_hz']:.1f} Hz" if s["rate_hz"] else "? Hz"
-        dropped = ", ".join(f"{n} {r}" for r, n in s["samples_dropped"].items())
-        click.echo(
-            f"  {s['name']:<12} {s['source']:<14} {rate:>8} {s['samples']:>7} samples "
-            f"{s['min_m']:9.2f} .. {s['max_m']:9.2f} m  {s['start_s']:.1f}-{s['end_s']:.1f} s  "
-            f"gaps>1s {s['gaps_over_1s']} (longest {s['longest_gap_s']:.1f} s)"
-            + (f"  dropped: {dropped}" if dropped else "")
-        )
-    if not summary["sensors"]:
-        click.echo("  none")
-    for name, why in summary["sensors_dropped"].items():
-        click.echo(f"  {name:<12} not used: {why}")
-    click.echo(
-        "references (never fused): "
-        + (
-            ", ".join(f"{r['name']} ({r['source']}, {r['datum']})" for r in summary["references"])
-            or "none"
-        )
-    )
-    click.echo(
-        "IMU: "
-        + (f"{summary['imu']['samples']} samples" if summary["imu"] else "none")
-        + "; attitude: "
-        + (f"{summary['attitude']['samples']} samples" if summary["attitude"] else "none")
-    )
-    click.echo(f"skipped bytes: {summary['skipped_bytes']}")
-    click.echo(
-        f"dropped samples: {summary['samples_dropped_total']} (by the reader's filters and as "
-        f"implausible: {sum(summary['implausible_samples'].values())})"
-    )
-    for note in summary["notes"]:
-        click.echo(f"note: {note}")
+    for line in as_text(summary):
+        click.echo(line)
 
 
 @cli.command()

@@ -1,4 +1,5 @@
-"""What a log holds, for ``altfuse info``: sources, rates, ranges, gaps and references."""
+"""What a log holds, for ``altfuse info``: sources, rates, ranges, gaps and references, and how
+``altfuse fuse`` puts them on one clock and one datum."""
 
 from __future__ import annotations
 
@@ -7,8 +8,10 @@ from typing import Any
 
 import numpy as np
 
+from altfuse.errors import AltfuseError
 from altfuse.model import FlightLog, Series
-from altfuse.screen import implausible_count
+from altfuse.pipeline import FuseOptions, Prepared, prepare
+from altfuse.screen import implausible_count, screen
 
 #: A pause between two samples longer than this counts as a gap [s].
 GAP_S = 1.0
@@ -47,8 +50,15 @@ def damage(flight: FlightLog) -> str | None:
     return f"{Path(flight.path).name}: " + "; ".join(parts) if parts else None
 
 
-def describe(flight: FlightLog) -> dict[str, Any]:
-    """A JSON-ready summary of ``flight``."""
+def describe(raw: FlightLog) -> dict[str, Any]:
+    """A JSON-ready summary of the log ``raw`` as read, screened, and referred as ``altfuse
+    fuse`` would with its defaults (one source is enough here); ``datum`` says why not where
+    it cannot be."""
+    try:
+        prepared: Prepared | None = prepare(raw, FuseOptions(min_sensors=1))
+    except AltfuseError as exc:
+        prepared, why = None, str(exc)
+    flight = prepared.log if prepared is not None else screen(raw)
     sensors = [describe_series(s) for s in flight.sensors]
     spans = [(d["start_s"], d["end_s"]) for d in sensors]
     return {
@@ -73,4 +83,75 @@ def describe(flight: FlightLog) -> dict[str, Any]:
         "implausible_samples": implausible_count(flight),
         "record_counts": flight.record_counts,
         "notes": list(flight.notes),
+        "datum": {"not referred": why} if prepared is None else describe_datum(prepared),
     }
+
+
+def describe_datum(prepared: Prepared) -> dict[str, Any]:
+    """Each source's lag, offset and scale, the take-off and the segments."""
+    referred = prepared.referred
+    return {
+        "takeoff_s": referred.takeoff_s,
+        "segments": [vars(s) for s in referred.segments],
+        "sensors": [
+            {
+                "name": o.name,
+                "lag_s": prepared.lags[o.name].lag_s if o.name in prepared.lags else None,
+                "lag": prepared.lags[o.name].how if o.name in prepared.lags else None,
+                "offset_m": o.offset_m,
+                "offset": o.method,
+                "scale": o.scale,
+                "scale_method": o.scale_method,
+            }
+            for o in referred.offsets
+        ],
+    }
+
+
+def as_text(summary: dict[str, Any]) -> list[str]:
+    """The lines ``altfuse info`` prints for a :func:`describe` summary."""
+    lines = [
+        f"{summary['file']}: {summary['vehicle']} ({summary['firmware']}), "
+        f"{summary['size_bytes']} bytes, sensors over {summary['duration_s']:.1f} s",
+        "altitude sources:",
+    ]
+    for s in summary["sensors"]:
+        rate = f"{s['rate_hz']:.1f} Hz" if s["rate_hz"] else "? Hz"
+        dropped = ", ".join(f"{n} {r}" for r, n in s["samples_dropped"].items())
+        lines.append(
+            f"  {s['name']:<12} {s['source']:<14} {rate:>8} {s['samples']:>7} samples "
+            f"{s['min_m']:9.2f} .. {s['max_m']:9.2f} m  {s['start_s']:.1f}-{s['end_s']:.1f} s  "
+            f"gaps>1s {s['gaps_over_1s']} (longest {s['longest_gap_s']:.1f} s)"
+            + (f"  dropped: {dropped}" if dropped else "")
+        )
+    if not summary["sensors"]:
+        lines.append("  none")
+    lines += [f"  {name:<12} not used: {why}" for name, why in summary["sensors_dropped"].items()]
+    lines += _datum_text(summary["datum"])
+    refs = ", ".join(f"{r['name']} ({r['source']}, {r['datum']})" for r in summary["references"])
+    imu, att = summary["imu"], summary["attitude"]
+    implausible = sum(summary["implausible_samples"].values())
+    lines += [
+        f"references (never fused): {refs or 'none'}",
+        f"IMU: {imu['samples'] if imu else 'no'} samples; "
+        f"attitude: {att['samples'] if att else 'no'} samples",
+        f"skipped bytes: {summary['skipped_bytes']}",
+        f"dropped samples: {summary['samples_dropped_total']} (by the reader's filters and as "
+        f"implausible: {implausible})",
+    ]
+    return lines + [f"note: {note}" for note in summary["notes"]]
+
+
+def _datum_text(datum: dict[str, Any]) -> list[str]:
+    if "not referred" in datum:
+        return [f"clock and datum: not referred: {datum['not referred']}"]
+    lines = ["clock and datum (as fuse refers them):"]
+    for s in datum["sensors"]:
+        lag = f"lag {s['lag_s']:.2f} s ({s['lag']}); " if s["lag"] else ""
+        scale = f"; scale {s['scale']:.4f} ({s['scale_method']})" if s["scale_method"] else ""
+        lines.append(f"  {s['name']:<12} {lag}offset {s['offset_m']:.2f} m ({s['offset']}){scale}")
+    lines += [
+        f"  segment {s['start_s']:.1f}-{s['end_s']:.1f} s: datum {s['datum']}"
+        for s in datum["segments"]
+    ]
+    return lines

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from altfuse import __version__
-from altfuse.align import Aligned, Lag, Span, align, gps_lags, shift
+from altfuse.align import Aligned, Lag, Span, align, gps_lags, shift, splices
 from altfuse.datum import Referral, Referred, refer_to_takeoff, referred_samples, tilt_correct
 from altfuse.errors import NoUsableSensorsError, ParameterError, UnsupportedLogError
 from altfuse.fuse import METHODS, FusionInput, FusionResult, Method, method
@@ -142,6 +142,7 @@ def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
         options.takeoff_climb_m,
         options.referral,
         ground_clearances(flight),
+        splices(aligned, None if flight.imu is None else flight.imu.t),
     )
     log.info(
         "%s: aligned %d ticks in %.2f s, datum in %.2f s",
@@ -299,6 +300,7 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
             "reference": referred.reference,
             "takeoff_s": referred.takeoff_s,
             "ground_window_s": list(referred.ground_window_s),
+            "segments": [asdict(s) for s in referred.segments],
             "offsets": [
                 {
                     "sensor": o.name,

@@ -180,11 +180,13 @@ def _range_limit(flight: FlightLog, s: Series, suffix: str) -> float | None:
     return cm / 100.0 if cm and cm > 0 else None
 
 
-def _stuck(s: Series, others: list[Series]) -> Mask:
-    """The samples of ``s`` in runs of one value over ``STUCK_MIN_S`` while another moved."""
+def _stuck(s: Series, others: list[Series]) -> tuple[Mask, list[str]]:
+    """The samples of ``s`` in runs of one value over ``STUCK_MIN_S`` while another moved, and
+    a note on each run."""
     out = np.zeros(s.t.size, dtype=bool)
+    notes: list[str] = []
     if s.t.size < STUCK_MIN_SAMPLES:
-        return out
+        return out, notes
     change = np.flatnonzero(np.diff(s.value) != 0) + 1
     starts = np.concatenate(([0], change))
     ends = np.concatenate((change, [s.t.size]))
@@ -199,8 +201,12 @@ def _stuck(s: Series, others: list[Series]) -> Mask:
             moved = float(np.ptp(np.percentile(v, [5, 95])))
             if moved > max(MOTION_MIN_M, MOTION_NOISES * white_noise_sigma(v)):
                 out[a:b] = True
+                notes.append(
+                    f"{s.name}: stuck at {s.value[a]:g} m from {lo:.1f} to {hi:.1f} s "
+                    f"({b - a} samples, dropped) while {o.name} moved {moved:.1f} m"
+                )
                 break
-    return out
+    return out, notes
 
 
 def screen(flight: FlightLog) -> FlightLog:
@@ -210,13 +216,16 @@ def screen(flight: FlightLog) -> FlightLog:
         screen_series(s, span, _range_limit(flight, s, "MAX_CM"), _range_limit(flight, s, "MIN_CM"))
         for s in flight.sensors
     ]
-    with_stuck = []
+    with_stuck, notes = [], list(flight.notes)
     for s in screened_all:
-        stuck = _stuck(s, [o for o in screened_all if o.name != s.name])
+        stuck, said = _stuck(s, [o for o in screened_all if o.name != s.name])
+        notes += said
         if stuck.any():
             dropped = dict(s.dropped, **{STUCK: int(stuck.sum())})
             s = replace(s, t=s.t[~stuck], value=s.value[~stuck], dropped=dropped)
         with_stuck.append(s)
+    # the references are screened like the sensors: a truth with a splice in it is no truth
+    references = tuple(r for r in (screen_series(r, span) for r in flight.references) if r.t.size)
     sensors, dropped_sources = [], dict(flight.dropped_sources)
     for s, screened in zip(flight.sensors, with_stuck, strict=True):
         if screened.t.size:
@@ -224,7 +233,13 @@ def screen(flight: FlightLog) -> FlightLog:
         else:
             reasons = ", ".join(f"{n} {r}" for r, n in screened.dropped.items())
             dropped_sources[s.name] = f"{s.source}: no plausible sample ({reasons})"
-    return replace(flight, sensors=tuple(sensors), dropped_sources=dropped_sources)
+    return replace(
+        flight,
+        sensors=tuple(sensors),
+        references=references,
+        dropped_sources=dropped_sources,
+        notes=tuple(notes),
+    )
 
 
 def implausible_count(flight: FlightLog) -> dict[str, int]:

@@ -140,9 +140,9 @@ class _Records:
 
     def timed(self, type_name: str, *fields: str) -> bool:
         """:meth:`has`, and the type has a time field (damage can rename it in its FMT)."""
-        return self.has(type_name, *fields) and self._time_field(type_name) is not None
+        return self.has(type_name, *fields) and self.time_field(type_name) is not None
 
-    def _time_field(self, type_name: str) -> tuple[str, float] | None:
+    def time_field(self, type_name: str) -> tuple[str, float] | None:
         """The field that holds a record's time since boot, and its units per second.
 
         ``TimeUS`` [us], else ``TimeMS`` [ms] where it is the first field. In Copter up to 3.4
@@ -175,8 +175,8 @@ class _Records:
         return self.raw(type_name, col) * self.multiplier(type_name, col)
 
     def times(self, type_name: str) -> FloatArray:
-        """Record times since boot [s] (see :meth:`_time_field`)."""
-        found = self._time_field(type_name)
+        """Record times since boot [s] (see :meth:`time_field`)."""
+        found = self.time_field(type_name)
         if found is None:
             raise KeyError(f"{type_name} has no time field")
         name, per_second = found
@@ -305,6 +305,11 @@ def _read_gps(b: _Builder) -> None:
         if not b.rec.timed(type_name, "Alt", "Status"):
             continue
         no_fix = b.rec.raw(type_name, "Status") < 3
+        if b.rec.time_field(type_name) == ("T", 1e3):
+            b.notes.append(
+                f"{type_name} time from {type_name}.T, the boot time: its TimeMS is the GPS time "
+                "of week in this firmware"
+            )
         _add_instances(
             b,
             "gps",
