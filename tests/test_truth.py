@@ -12,7 +12,8 @@ from altfuse.align import estimate_lag
 from altfuse.cli import cli
 from altfuse.evaluation import evaluate
 from altfuse.io import read_log
-from altfuse.pipeline import FuseOptions, fuse_log, prepare_log
+from altfuse.fuse import METHODS
+from altfuse.pipeline import FuseOptions, fuse_log, fusion_input, prepare_log
 from conftest import SHARED_LOGS, shared_log
 
 TRUTH = sorted(p.name for p in (SHARED_LOGS / "truth").glob("*.BIN"))
@@ -115,3 +116,28 @@ def test_info_shows_the_clock_fix_the_lag_the_scale_and_the_segments() -> None:
     assert "segment 88.2-251.7 s: datum the main segment's" in text
     meta = fuse_log(path).provenance["datum"]
     assert [s["start_s"] for s in meta["segments"]] == [21.1, 88.2]
+
+
+@pytest.mark.parametrize(
+    ("name", "source"),
+    [
+        ("copter_3.4dev_gusbus4_climb305m.BIN", "VIBE[0].Clip0"),  # Copter 3.4: Clip0..2
+        ("copter_4.5.0dev_skyrats_rfnd_8m.BIN", "VIBE[0].Clip"),  # 4.x: one record per IMU
+    ],
+)
+def test_gps_vertical_velocity_and_accelerometer_quality_reach_the_methods(
+    name: str, source: str
+) -> None:
+    prepared = prepare_log(shared_log(f"truth/{name}"), FuseOptions())
+    inputs = fusion_input(prepared, METHODS["smoother"], "smoother")
+    assert inputs.vibration is not None
+    assert inputs.vibration.source == source
+    assert inputs.vibration.level.shape == (inputs.vibration.t.size, 3)
+    assert np.all(np.diff(inputs.vibration.clips) >= 0)  # a cumulative count
+    assert inputs.imu_rate_hz == pytest.approx(25.0, rel=0.2)
+    # GPS.VZ is logged down; up, and moved by the GPS's lag, it is the GPS's own climb rate
+    velocity = inputs.gps_velocity_up
+    assert velocity is not None
+    gps = next(s for s in prepared.sensors if s.name == "gps")
+    rate = np.gradient(gps.value, gps.t)
+    assert np.corrcoef(np.interp(gps.t, velocity.t, velocity.value), rate)[0, 1] > 0.95
