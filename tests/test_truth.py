@@ -11,8 +11,8 @@ from pymavlink import DFReader
 from altfuse.align import estimate_lag
 from altfuse.cli import cli
 from altfuse.evaluation import evaluate
-from altfuse.io import read_log
 from altfuse.fuse import METHODS
+from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, fuse_log, fusion_input, prepare_log
 from conftest import SHARED_LOGS, shared_log
 
