@@ -92,6 +92,7 @@ class LogResult:
     duration_s: float = 0.0
     sensors: str = ""
     samples: int = 0
+    diverged: int = 0  # ticks whose fused value left every sensor (altfuse.guard)
     truth: str = ""
     metrics: dict[str, float | None] = field(default_factory=dict)
 
@@ -185,6 +186,8 @@ def process(job: Job, options: BatchOptions) -> LogResult:
                 stats = row.overall.as_dict()
                 metrics[f"{row.name}_rmse"] = stats["rmse"]
                 metrics[f"{row.name}_max"] = stats["max_abs"]
+            for method, found in done.evaluation.diverged().items():
+                metrics[f"{method}_diverged"] = found["diverged_ticks"]
         run = done.run
         return LogResult(
             name,
@@ -192,6 +195,7 @@ def process(job: Job, options: BatchOptions) -> LogResult:
             duration_s=time.perf_counter() - started,
             sensors=" ".join(run.referred.names),
             samples=int(run.referred.t.size),
+            diverged=int(run.provenance["guard"]["diverged_ticks"]),
             truth=label,
             metrics=metrics,
         )
@@ -239,7 +243,7 @@ def write_summary(results: Iterable[LogResult], path: Path) -> None:
         row["duration_s"] = round(r.duration_s, 3)
         row.update(r.metrics)
         rows.append(row)
-    columns = ["log", "status", "error", "duration_s", "sensors", "samples", "truth"]
+    columns = ["log", "status", "error", "duration_s", "sensors", "samples", "diverged", "truth"]
     table = pd.DataFrame.from_records(rows)
     table = table.reindex(columns=columns + [c for c in table.columns if c not in columns])
     with atomic_outputs() as stage:

@@ -331,6 +331,12 @@ def fuse(
     warning = damage(run.log)
     if warning:
         logging.getLogger("altfuse").warning("%s", warning)
+    record = run.provenance["guard"]
+    if record["diverged_ticks"]:
+        logging.getLogger("altfuse").warning(
+            "%s: %s left every sensor on %d ticks (by up to %.1f m): status 'diverged'",
+            log.name, method, record["diverged_ticks"], record["max_excursion_m"],
+        )  # fmt: skip
     counts = run.provenance["status_counts"]
     click.echo(
         f"{output}: {run.referred.t.size} rows, method {method}, "
@@ -410,6 +416,11 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
             click.echo(_stats_line(row.name, row.kind, row.segments[label]))
     for method, why in result.failed.items():
         click.echo(f"not run: {method}: {why}")
+    for method, found in result.diverged().items():
+        click.echo(
+            f"diverged: {method} left every sensor on {found['diverged_ticks']} ticks "
+            f"(by up to {found['max_excursion_m']:.1f} m)"
+        )
     with atomic_outputs() as stage:
         if json_path is not None:
             stage(json_path, write_json(result.as_dict()))

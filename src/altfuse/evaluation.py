@@ -93,7 +93,18 @@ class Evaluation:
                 for r in self.rows
             ],
             "failed": self.failed,
+            "diverged": self.diverged(),
         }
+
+    def diverged(self) -> dict[str, dict[str, Any]]:
+        """Each method run whose fused value left every sensor (:mod:`altfuse.guard`): its
+        flagged ticks and largest excursion [m]."""
+        out = {}
+        for name, run in self.runs.items():
+            record = run.provenance["guard"]
+            if record["diverged_ticks"]:
+                out[name] = {k: record[k] for k in ("diverged_ticks", "max_excursion_m")}
+        return out
 
 
 def _on_clock(series: Series, referred: Referred) -> FloatArray:

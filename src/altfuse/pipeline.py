@@ -16,6 +16,7 @@ from altfuse.align import Aligned, Lag, Span, align, gps_lags, shift, splices
 from altfuse.datum import Referral, Referred, refer_to_takeoff, referred_samples, tilt_correct
 from altfuse.errors import NoUsableSensorsError, ParameterError, UnsupportedLogError
 from altfuse.fuse import METHODS, FusionInput, FusionResult, Method, method
+from altfuse.guard import guard
 from altfuse.inertial import referred_vertical_acceleration
 from altfuse.io import read_log
 from altfuse.model import FlightLog, Samples, Series
@@ -225,7 +226,8 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
     chosen = method(options.method)
     inputs = fusion_input(prepared, chosen, options.method)
     started = time.perf_counter()
-    result = chosen(inputs, options.params_of())
+    guarded = guard(chosen(inputs, options.params_of()), inputs)
+    result = guarded.result
     log.info(
         "%s: fused with %s in %.2f s",
         Path(flight.path).name,
@@ -233,6 +235,7 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
         time.perf_counter() - started,
     )
     record = provenance(prepared, result)
+    record["guard"] = guarded.record
     record["options"] = asdict(options)
     if "accel" in chosen.uses:
         record["vertical_acceleration"] = (

@@ -16,12 +16,13 @@ from altfuse.model import FloatArray, Samples, SensorKind, Vibration
 from altfuse.params import Params
 
 #: Per-tick status of the fused value.
-Status = Literal["fused", "equal", "single", "none", "inertial"]
+Status = Literal["fused", "equal", "single", "none", "inertial", "diverged"]
 FUSED: Final[Status] = "fused"  # weighted as the method says
 EQUAL: Final[Status] = "equal"  # the method's weights were all zero: equal weights over the valid
 SINGLE: Final[Status] = "single"  # one valid sensor: the result is that sensor
 NONE: Final[Status] = "none"  # no valid sensor: the result is NaN
 INERTIAL: Final[Status] = "inertial"  # no valid sensor; the accelerometer carried the estimate
+DIVERGED: Final[Status] = "diverged"  # the value left every valid sensor (altfuse.guard)
 
 #: What a method may ask the pipeline to compute from the log beyond what every method gets.
 LogInput = Literal["accel"]

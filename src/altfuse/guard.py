@@ -1,0 +1,98 @@
+"""The divergence guard: a fused altitude that leaves every sensor is flagged, never silent.
+
+At each tick with a valid sensor, the *excursion* is how far the fused value lies outside the
+envelope of the valid sensors' heights (0 inside it)::
+
+    excursion = max(min_i z_i - fused, fused - max_i z_i, 0)
+
+It is too far when it exceeds ``max(FLOOR_M, SIGMAS * sqrt(s^2 + f^2))``, with ``s`` the white
+noise of the sensor at the envelope's nearer edge (from its own samples' second differences) and
+``f`` the method's own ``fused_std`` where it gives one. A run of such ticks lasting ``MIN_S`` or
+more gets the status ``diverged``: the value is kept (it is what the method said), the status
+says not to trust it, the provenance counts it and the command line warns in one line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from altfuse.fuse.base import DIVERGED, FusionInput, FusionResult
+from altfuse.metrics import white_noise_sigma
+from altfuse.model import FloatArray
+
+#: An excursion below this [m] is never a divergence, however quiet the sensors.
+FLOOR_M = 1.0
+#: Standard deviations of the combined uncertainty an excursion must exceed.
+SIGMAS = 3.0
+#: Shortest run of such ticks that is flagged [s]: a filter may overshoot a step for a moment.
+MIN_S = 2.0
+
+
+@dataclass(frozen=True)
+class Guarded:
+    """A result with its diverged ticks flagged, and what the guard found."""
+
+    result: FusionResult
+    record: dict[str, Any]
+
+
+def excursion(fused: FloatArray, z: FloatArray) -> FloatArray:
+    """How far [m] ``fused`` lies outside the envelope of the valid sensors ``z`` (T, n); NaN
+    where no sensor is valid."""
+    valid = np.isfinite(z).any(axis=1)
+    lo = np.min(np.where(np.isfinite(z), z, np.inf), axis=1)
+    hi = np.max(np.where(np.isfinite(z), z, -np.inf), axis=1)
+    out = np.maximum(np.maximum(lo - fused, fused - hi), 0.0)
+    return np.where(valid & np.isfinite(fused), out, np.nan)
+
+
+def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
+    """``result`` with the ticks of every divergence (see the module doc) flagged ``diverged``."""
+    z, fused = inputs.z, result.fused
+    away = excursion(fused, z)
+    noise = np.array(
+        [white_noise_sigma(s.value) if s.value.size > 2 else 0.0 for s in inputs.samples]
+    )
+    edge = _edge_sensor(fused, z)
+    s = np.where(edge >= 0, noise[np.maximum(edge, 0)], 0.0)
+    f = result.tick_traces.get("fused_std", np.zeros(fused.size))
+    limit = np.maximum(FLOOR_M, SIGMAS * np.sqrt(s**2 + np.nan_to_num(f) ** 2))
+    beyond = np.nan_to_num(away) > limit
+    flagged = _long_runs(beyond, round(MIN_S / inputs.dt_s))
+    record = {
+        "floor_m": FLOOR_M,
+        "sigmas": SIGMAS,
+        "min_s": MIN_S,
+        "diverged_ticks": int(flagged.sum()),
+        "max_excursion_m": float(np.nanmax(away)) if np.isfinite(away).any() else 0.0,
+        "spans_s": _spans(inputs.t, flagged),
+    }
+    if not flagged.any():
+        return Guarded(result, record)
+    status = np.where(flagged, DIVERGED, result.status)
+    return Guarded(replace(result, status=status), record)
+
+
+def _edge_sensor(fused: FloatArray, z: FloatArray) -> np.ndarray:
+    """The index of the valid sensor nearest to ``fused`` at each tick (-1: none)."""
+    distance = np.where(np.isfinite(z), np.abs(z - fused[:, None]), np.inf)
+    nearest = np.argmin(distance, axis=1)
+    return np.where(np.isfinite(distance.min(axis=1)), nearest, -1)
+
+
+def _long_runs(mask: np.ndarray, ticks: int) -> np.ndarray:
+    """``mask`` kept only in its runs of at least ``ticks`` ticks."""
+    out = np.zeros(mask.size, dtype=bool)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        if stop - start >= max(ticks, 1):
+            out[start:stop] = True
+    return out
+
+
+def _spans(t: FloatArray, mask: np.ndarray) -> list[list[float]]:
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    return [[float(t[a]), float(t[b - 1])] for a, b in zip(edges[::2], edges[1::2], strict=True)]

@@ -1,0 +1,112 @@
+"""The divergence guard: a fused value that leaves every sensor is flagged, never silent."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from altfuse.cli import cli
+from altfuse.errors import AltfuseError
+from altfuse.fuse import METHODS, FusionInput
+from altfuse.fuse.base import FusionResult, combine
+from altfuse.guard import FLOOR_M, MIN_S, excursion, guard
+from altfuse.metrics import white_noise_sigma
+from altfuse.pipeline import FuseOptions, fuse_log
+from conftest import SHARED_LOGS, shared_log
+
+
+def heights() -> FusionInput:
+    rng = np.random.default_rng(7)
+    z = 10.0 + rng.normal(0.0, 0.1, (300, 2))  # 30 s at 10 Hz, two sensors near 10 m
+    return FusionInput.from_heights(z, 0.1)
+
+
+def shifted(inputs: FusionInput, start: int, stop: int, by_m: float) -> FusionResult:
+    mean = combine(inputs.z, np.isfinite(inputs.z).astype(float), "toy")
+    fused = mean.fused.copy()
+    fused[start:stop] += by_m
+    return FusionResult("toy", fused, mean.weights, mean.status)
+
+
+def test_the_excursion_is_the_distance_outside_the_sensors_envelope() -> None:
+    z = np.array([[1.0, 3.0], [1.0, np.nan], [np.nan, np.nan]])
+    np.testing.assert_allclose(excursion(np.array([2.0, 4.0, 5.0]), z), [0.0, 3.0, np.nan])
+    np.testing.assert_allclose(excursion(np.array([-1.0, 1.0, 0.0]), z), [2.0, 0.0, np.nan])
+
+
+def test_a_long_excursion_is_flagged_and_a_short_one_is_not() -> None:
+    inputs = heights()
+    long_run = guard(shifted(inputs, 100, 130, 5.0), inputs)  # 3 s, 5 m above both
+    assert long_run.record["diverged_ticks"] == 30
+    assert long_run.record["spans_s"] == [[10.0, pytest.approx(12.9)]]
+    assert set(long_run.result.status[100:130]) == {"diverged"}
+    assert "diverged" not in set(long_run.result.status[:100])
+    short = guard(shifted(inputs, 100, 100 + round(MIN_S / 0.1) - 1, 5.0), inputs)
+    assert short.record["diverged_ticks"] == 0
+    small = guard(shifted(inputs, 100, 200, 0.8 * FLOOR_M), inputs)
+    assert small.record["diverged_ticks"] == 0  # below the floor in metres
+    assert small.result.status is small.result.status  # nothing to flag: the result as it was
+
+
+LOGS = [f"ardupilot/{p.name}" for p in sorted((SHARED_LOGS / "ardupilot").glob("*"))] + [
+    f"truth/{p.name}" for p in sorted((SHARED_LOGS / "truth").glob("*"))
+]
+
+
+@pytest.mark.parametrize("log", LOGS)
+def test_no_method_leaves_every_sensor_unflagged(log: str) -> None:
+    """Every method on every shared log: an unflagged run of MIN_S or more never lies beyond
+    every sensor by more than the guard's largest possible limit."""
+    path = shared_log(log)
+    for name in METHODS:
+        try:
+            run = fuse_log(path, FuseOptions(method=name, min_sensors=1))
+        except AltfuseError:
+            continue
+        z, fused, status = run.referred.h, run.result.fused, run.result.status
+        noise = max(
+            white_noise_sigma(col[np.isfinite(col)]) for col in z.T if np.isfinite(col).sum() > 2
+        )
+        std = run.result.tick_traces.get("fused_std", np.zeros(fused.size))
+        bound = np.maximum(FLOOR_M, 3 * np.sqrt(noise**2 + np.nan_to_num(std) ** 2))
+        lo = np.min(np.where(np.isfinite(z), z, np.inf), axis=1)
+        hi = np.max(np.where(np.isfinite(z), z, -np.inf), axis=1)
+        some = np.isfinite(z).any(axis=1)
+        outside = ((fused < lo - bound) | (fused > hi + bound)) & (status != "diverged") & some
+        run_ticks, longest = 0, 0
+        for bad in outside:
+            run_ticks = run_ticks + 1 if bad else 0
+            longest = max(longest, run_ticks)
+        assert longest * 0.1 < MIN_S, f"{name}: {longest} ticks beyond every sensor, unflagged"
+        assert (status == "diverged").sum() == run.provenance["guard"]["diverged_ticks"]
+
+
+def test_a_divergence_is_warned_in_one_line_and_reported_by_evaluate_and_batch(
+    tmp_path: Path,
+) -> None:
+    log = shared_log("ardupilot/beastayyg_sample.bin")  # the smoother: 32 km after the pause
+    out = tmp_path / "o.csv"
+    result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), "-m", "smoother"])
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.stderr.splitlines() if "diverged" in line]
+    assert len(warnings) == 1
+    assert warnings[0].startswith("altfuse: warning: beastayyg_sample.bin: smoother left every")
+    table = pd.read_csv(out)
+    meta = json.loads(out.with_suffix(".meta.json").read_text())
+    assert (table.status == "diverged").sum() == meta["guard"]["diverged_ticks"] > 0
+    assert meta["status_counts"]["diverged"] == meta["guard"]["diverged_ticks"]
+    report = CliRunner().invoke(cli, ["evaluate", str(log), "--methods", "support,smoother"])
+    assert "diverged: smoother left every sensor on" in report.stdout
+    assert "diverged: support" not in report.stdout
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / log.name).symlink_to(log)
+    args = ["batch", str(folder), "-o", str(tmp_path / "b"), "-m", "smoother", "--jobs", "1"]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    summary = pd.read_csv(tmp_path / "b" / "summary.csv")
+    assert summary.diverged[0] == meta["guard"]["diverged_ticks"]
