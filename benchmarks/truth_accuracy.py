@@ -6,12 +6,15 @@ Run on demand:  python benchmarks/truth_accuracy.py [--shared ../shared/logs] [-
 Per log: each sensor's RMSE and maximum error [m] against ``SIM.Alt`` (referred to take-off as
 ``altfuse evaluate`` does) with the datum an offset only (``referral="offset"``) and with offset,
 scale and lag (``referral="full"``, the default), then every method's RMSE with the default
-options, the best single sensor's and the onboard EKF's. A log that cannot be fused prints why.
+options, the best single sensor's and the onboard EKF's; then per method its RMSE, maximum
+error, +-2 sigma coverage and whether it passes the project's bar (``tests/accuracy.py``'s
+``verdict``: the checks it fails). A log that cannot be fused prints why.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -21,6 +24,9 @@ from altfuse.fuse import METHODS
 from altfuse.pipeline import FuseOptions
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from accuracy import verdict  # noqa: E402
 
 
 def measure(path: Path) -> str:
@@ -52,6 +58,13 @@ def measure(path: Path) -> str:
         + (f"; EKF {ekf.rmse:.2f}" if ekf else "")
     )
     lines += [f"   not run: {m}: {why}" for m, why in full.failed.items()]
+    for method in full.runs:
+        v = verdict(full, method)
+        fails = ", ".join(v["fails"]) or "PASS"  # type: ignore[arg-type]
+        lines.append(
+            f"   {method:<11} RMSE {v['rmse']:8.3f}  max {v['max']:8.3f}  "
+            f"coverage {v['coverage']:5.2f}  {fails}"
+        )
     return "\n".join(lines)
 
 

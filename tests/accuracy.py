@@ -9,14 +9,15 @@ errors lie within its +-2 ``fused_std``. Used by ``tests/test_smoother_accuracy.
 
 from __future__ import annotations
 
+import math
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from altfuse.evaluation import choose_truth
-from altfuse.fuse import METHODS
+from altfuse.evaluation import Evaluation, choose_truth
+from altfuse.fuse import METHODS, FusionResult
 from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, prepare, run_method
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
@@ -65,3 +66,49 @@ def best_other(row: dict[str, float]) -> str:
 def label(flight: Flight) -> str:
     scenario, seed, faults = flight
     return f"{scenario} seed {seed}" + (f" {'+'.join(faults)}" if faults else "")
+
+
+def coverage(error: np.ndarray, sigma: np.ndarray) -> float:
+    """The share of the ticks with both whose true error lies within +-2 sigma."""
+    ok = np.isfinite(error) & np.isfinite(sigma)
+    return float(np.mean(np.abs(error[ok]) <= 2 * sigma[ok])) if ok.any() else math.nan
+
+
+def sigma_of(result: FusionResult) -> np.ndarray | None:
+    """A method's own standard deviation per tick, where it gives one."""
+    if "fused_std" in result.tick_traces:
+        return result.tick_traces["fused_std"]
+    if "fused_variance" in result.tick_traces:
+        return np.sqrt(result.tick_traces["fused_variance"])
+    return None
+
+
+def verdict(evaluation: Evaluation, method: str) -> dict[str, object]:
+    """Whether ``method`` passes on the log of ``evaluation`` (the project's bar, per log):
+    RMSE <= the best single sensor's + max(3 cm, 10 %), maximum error <= max(2x, +0.10 m)
+    that sensor's, +-2 sigma coverage of the true errors in [0.90, 0.99], and an RMSE below
+    the onboard EKF's (where the log has one)."""
+    rows = {r.name: r for r in evaluation.rows}
+    sensors = [r for r in evaluation.rows if r.kind == "sensor"]
+    best = min(sensors, key=lambda r: r.overall.rmse)
+    mine = rows[method].overall
+    run = evaluation.runs[method]
+    sigma = sigma_of(run.result)
+    error = run.result.fused - evaluation.truth.h
+    cover = coverage(error, sigma) if sigma is not None else math.nan
+    ekf = rows["ekf"].overall.rmse if "ekf" in rows and rows["ekf"].kind == "onboard" else None
+    checks = {
+        "rmse": mine.rmse <= best.overall.rmse + max(0.03, 0.1 * best.overall.rmse),
+        "max": mine.max_abs <= max(2 * best.overall.max_abs, best.overall.max_abs + 0.10),
+        "coverage": 0.90 <= cover <= 0.99,
+        "ekf": ekf is None or mine.rmse < ekf,
+    }
+    return {
+        "rmse": mine.rmse,
+        "max": mine.max_abs,
+        "coverage": cover,
+        "best": best.name,
+        "best_rmse": best.overall.rmse,
+        "ekf_rmse": ekf,
+        "fails": [k for k, ok in checks.items() if not ok],
+    }
