@@ -89,13 +89,13 @@ def test_no_method_leaves_every_sensor_unflagged(log: str) -> None:
 def test_a_divergence_is_warned_in_one_line_and_reported_by_evaluate_and_batch(
     tmp_path: Path,
 ) -> None:
-    log = shared_log("ardupilot/beastayyg_sample.bin")  # the smoother: 32 km after the pause
+    log = shared_log("truth/plane_3.3.0a1_gitterbadger_autotest_climb386m_imunoise.BIN")
     out = tmp_path / "o.csv"
     result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), "-m", "smoother"])
     assert result.exit_code == 0, result.output
     warnings = [line for line in result.stderr.splitlines() if "diverged" in line]
     assert len(warnings) == 1
-    assert warnings[0].startswith("altfuse: warning: beastayyg_sample.bin: smoother left every")
+    assert warnings[0].startswith(f"altfuse: warning: {log.name}: smoother left every")
     table = pd.read_csv(out)
     meta = json.loads(out.with_suffix(".meta.json").read_text())
     assert (table.status == "diverged").sum() == meta["guard"]["diverged_ticks"] > 0

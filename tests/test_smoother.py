@@ -17,6 +17,7 @@ from altfuse.cli import cli
 from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import (
     DRIFT_GAIN,
+    LOCKOUT_S,
     SmootherParams,
     fuse_smoother,
     measurement_sigma,
@@ -156,3 +157,19 @@ def test_a_drifting_barometer_gets_a_drift_rate(
     else:
         assert params["baro_drift"].startswith("not modelled")
         assert params.get("baro_drift_loglik_gain", -1.0) < DRIFT_GAIN
+
+
+def test_a_step_in_every_sensor_without_acceleration_is_followed() -> None:
+    """Issue 15: 5 m in every sensor at once, the accelerometer still (a spliced log, a reset):
+    the gate rejects every sample, and after LOCKOUT_S the estimate is let loose, not locked
+    out for the rest of the flight."""
+    rng = np.random.default_rng(8)
+    t = np.arange(0.0, 60.0, 0.1)
+    truth = np.where(t < 30.0, 10.0, 15.0)
+    z = truth[:, None] + rng.normal(0.0, 0.05, (t.size, 2))
+    still = np.zeros(t.size)
+    inputs = FusionInput.from_heights(z, 0.1, kinds=("gps", "baro"), accel_up=still)
+    res = fuse_smoother(inputs, SmootherParams())
+    after = t >= 30.0 + LOCKOUT_S + 1.0
+    assert np.max(np.abs(res.fused[after] - 15.0)) < 0.1
+    assert res.params["rejected_gps"] + res.params["rejected_baro"] < 2 * 10 * (LOCKOUT_S + 1)
