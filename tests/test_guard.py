@@ -17,7 +17,7 @@ from altfuse.fuse.base import FusionResult, combine
 from altfuse.guard import FLOOR_M, MIN_S, excursion, guard
 from altfuse.metrics import white_noise_sigma
 from altfuse.pipeline import FuseOptions, fuse_log
-from conftest import SHARED_LOGS, shared_log
+from conftest import ROOT, SHARED_LOGS, shared_log
 
 
 def heights() -> FusionInput:
@@ -89,24 +89,31 @@ def test_no_method_leaves_every_sensor_unflagged(log: str) -> None:
 def test_a_divergence_is_warned_in_one_line_and_reported_by_evaluate_and_batch(
     tmp_path: Path,
 ) -> None:
-    log = shared_log("truth/plane_3.3.0a1_gitterbadger_autotest_climb386m_imunoise.BIN")
+    """delay1 in the paper's form freezes at the start of the hover's 240 m climb (the
+    constant-altitude recursion, kept selectable on purpose): a divergence by design."""
+    log = ROOT / "sample_logs" / "hover.bin"
+    paper = ["-m", "delay1", "--form", "paper"]
     out = tmp_path / "o.csv"
-    result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), "-m", "smoother"])
+    result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), *paper])
     assert result.exit_code == 0, result.output
     warnings = [line for line in result.stderr.splitlines() if "diverged" in line]
-    assert len(warnings) == 1
-    assert warnings[0].startswith(f"altfuse: warning: {log.name}: smoother left every")
+    assert warnings == [
+        "altfuse: warning: hover.bin: delay1 left every sensor on 1635 ticks (by up to 113.3 m): "
+        "status 'diverged'"
+    ]
     table = pd.read_csv(out)
     meta = json.loads(out.with_suffix(".meta.json").read_text())
-    assert (table.status == "diverged").sum() == meta["guard"]["diverged_ticks"] > 0
-    assert meta["status_counts"]["diverged"] == meta["guard"]["diverged_ticks"]
-    report = CliRunner().invoke(cli, ["evaluate", str(log), "--methods", "support,smoother"])
-    assert "diverged: smoother left every sensor on" in report.stdout
+    assert (table.status == "diverged").sum() == meta["guard"]["diverged_ticks"] == 1635
+    assert meta["status_counts"]["diverged"] == 1635
+    report = CliRunner().invoke(
+        cli, ["evaluate", str(log), "--methods", "support,delay1", "--form", "paper"]
+    )
+    assert "diverged: delay1 left every sensor on 1635 ticks" in report.stdout
     assert "diverged: support" not in report.stdout
     folder = tmp_path / "in"
     folder.mkdir()
     (folder / log.name).symlink_to(log)
-    args = ["batch", str(folder), "-o", str(tmp_path / "b"), "-m", "smoother", "--jobs", "1"]
+    args = ["batch", str(folder), "-o", str(tmp_path / "b"), *paper, "--jobs", "1"]
     assert CliRunner().invoke(cli, args).exit_code == 0
     summary = pd.read_csv(tmp_path / "b" / "summary.csv")
-    assert summary.diverged[0] == meta["guard"]["diverged_ticks"]
+    assert summary.diverged[0] == 1635
