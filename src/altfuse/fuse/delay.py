@@ -67,6 +67,10 @@ from altfuse.params import Params, param
 #: Smallest measurement variance [m²]: keeps 1/delta2 finite where the estimate is 0 (the first
 #: sample has no spread) or negative (cross-covariance larger than auto-covariance by chance).
 VARIANCE_FLOOR_M2 = 1e-4
+#: A pause this long [s] in every sensor restarts the recursions (3.1-3.3): their running
+#: statistics describe one stationary flight, and across a log's splice the one before it
+#: held the estimate 50 m off for a minute (the 3.4 Solo log).
+RESTART_S = 5.0
 #: Smallest estimate variance P+ [m²]: only numerical (the paper's form drives P+ towards 0).
 ESTIMATE_FLOOR_M2 = 1e-12
 Form = Literal["practical", "paper"]
@@ -201,12 +205,24 @@ def spatial_weights(pplus: FloatArray, valid: FloatArray) -> FloatArray:
         return np.where(total > 0, inv / total, np.nan)
 
 
+def _stretches(z: FloatArray, ticks: int) -> list[slice]:
+    """The parts of the clock between pauses of at least ``ticks`` in every sensor."""
+    some = np.flatnonzero(np.isfinite(z).any(axis=1))
+    if not some.size:
+        return [slice(0, z.shape[0])]
+    cuts = some[1:][np.diff(some) >= ticks]
+    starts = [0, *cuts.tolist()]
+    return [slice(a, b) for a, b in zip(starts, [*cuts.tolist(), z.shape[0]], strict=True)]
+
+
 def layer1(inputs: FusionInput, steps: int, params: DelayParams) -> FusionResult:
     """Temporal (3.2 or 3.3), then spatial (3.4) fusion, with ``P*`` as a per-tick trace."""
     z, form = inputs.z, params.form
     q = params.q_m2_s * inputs.dt_s
-    delta2 = measurement_variances(z)
-    zplus, pplus = temporal_fusion(z, delta2, steps, form, q)
+    delta2, zplus, pplus = (np.full(z.shape, np.nan) for _ in range(3))
+    for part in _stretches(z, round(RESTART_S / inputs.dt_s)):
+        delta2[part] = measurement_variances(z[part])
+        zplus[part], pplus[part] = temporal_fusion(z[part], delta2[part], steps, form, q)
     valid = np.isfinite(z)
     w = spatial_weights(pplus, valid)
     inv = np.where(valid, 1.0 / pplus, 0.0).sum(axis=1)
