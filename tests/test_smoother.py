@@ -18,10 +18,12 @@ from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import (
     DRIFT_GAIN,
     LOCKOUT_S,
+    Q_AGREEMENT_MIN_SHARE,
     SmootherParams,
     fuse_smoother,
     measurement_sigma,
     terrain_noise,
+    wander_bound,
 )
 from altfuse.params import InvalidParameter
 from altfuse.simulate import simulate_flight, write_simulated_log
@@ -173,3 +175,31 @@ def test_a_step_in_every_sensor_without_acceleration_is_followed() -> None:
     after = t >= 30.0 + LOCKOUT_S + 1.0
     assert np.max(np.abs(res.fused[after] - 15.0)) < 0.1
     assert res.params["rejected_gps"] + res.params["rejected_baro"] < 2 * 10 * (LOCKOUT_S + 1)
+
+
+def test_the_agreement_of_two_sensors_bounds_their_wander_from_above() -> None:
+    """Var(d(t + L) - d(t)) = q L + 2 sigma^2 >= q L: the bound does not undercut the density
+    beyond its sampling error."""
+    rng = np.random.default_rng(10)
+    dt, q = 0.1, 0.01  # a difference wandering at 0.01 m^2/s
+    walk = np.cumsum(rng.normal(0.0, np.sqrt(q * dt), 20000))
+    assert 0.8 * q < wander_bound(walk, dt) < 1.5 * q  # within its sampling error
+    noisy = walk + rng.normal(0.0, 0.7, walk.size)  # a real GPS's noise only loosens it
+    assert wander_bound(noisy, dt) > 2 * q
+    still = rng.normal(0.0, 0.005, walk.size)  # two simulated sensors: millimetres apart
+    assert wander_bound(still, dt) < 1e-5
+
+
+def test_sensors_that_agree_tighten_the_default_random_walks() -> None:
+    rng = np.random.default_rng(11)
+    t = np.arange(0.0, 200.0, 0.1)
+    h = 20 * np.sin(t / 30)
+    agree = np.column_stack([h + rng.normal(0, 0.005, t.size), h + rng.normal(0, 0.005, t.size)])
+    res = fuse_smoother(FusionInput.from_heights(agree, 0.1), SmootherParams())
+    assert res.params["q_offset_gps_m2_s"] == pytest.approx(1e-2 * Q_AGREEMENT_MIN_SHARE)
+    wander = agree.copy()
+    wander[:, 0] += np.cumsum(rng.normal(0, np.sqrt(0.01 * 0.1), t.size)) + rng.normal(
+        0, 0.5, t.size
+    )
+    res = fuse_smoother(FusionInput.from_heights(wander, 0.1), SmootherParams())
+    assert res.params["q_offset_gps_m2_s"] == pytest.approx(0.01)  # the default, untouched

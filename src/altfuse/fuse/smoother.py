@@ -136,6 +136,10 @@ DRIFT_GAIN = 10.83 / 2
 EVIDENCE_SLACK = 1e-3
 #: How well "standing still at the take-off point" holds on the ground [m, m/s].
 STILL_SIGMA = 0.02
+#: The spans [s] over which two sensors' agreement is measured, and the least share of the
+#: default random walks it may leave (a floor: two simulated sensors can agree exactly).
+AGREEMENT_LAGS_S = (2.0, 5.0, 10.0, 20.0, 40.0)
+Q_AGREEMENT_MIN_SHARE = 1e-2
 #: Longest time [s] every sensor's samples may be rejected before the estimate is let loose.
 LOCKOUT_S = 2.0
 #: EM iterations (each a forward and a backward pass) after the first pass.
@@ -514,6 +518,47 @@ def _known_names(values: Mapping[str, float], names: Sequence[str], field: str) 
         raise InvalidParameter(field, f"names no sensor of this log: {', '.join(unknown)}")
 
 
+def wander_bound(d: FloatArray, dt: float) -> float:
+    """An upper bound [m^2/s] on the random-walk density of ``d`` on a clock of step ``dt``:
+    ``Var(d(t + L) - d(t)) = q L + 2 sigma^2 >= q L``, so ``q <= Var_L / L`` at every span
+    ``L`` of AGREEMENT_LAGS_S (each variance robust, from the MAD); the least of them. Noise
+    only loosens it: beyond its sampling error it never claims that two sensors agree better
+    than they do. NaN when the difference is too short."""
+    bounds = []
+    for lag in AGREEMENT_LAGS_S:
+        k = max(1, round(lag / dt))
+        inc = d[k:] - d[:-k] if d.size > k else np.zeros(0)
+        inc = inc[np.isfinite(inc)]
+        if inc.size >= 20:
+            bounds.append(mad_sigma(inc) ** 2 / (k * dt))
+    return min(bounds) if bounds else math.nan
+
+
+def _bounded_by_agreement(
+    inputs: FusionInput, q_time: FloatArray, given: Sequence[bool]
+) -> FloatArray:
+    """GPS and barometer offsets' random walks no looser than the sensors' agreement allows.
+
+    Two sensors' offsets wander apart at the sum of their densities, which their difference
+    bounds from above (:func:`wander_bound`); each one's can be no larger. A pair that agrees better
+    than the defaults' sum scales both defaults down in their ratio (the prior's preference of a
+    stable barometer over a wandering GPS stays); never up. In the simulators' logs a GPS and a
+    scaled barometer agree to a centimetre over minutes, where the defaults allow a metre and
+    gave a fused_std five to twenty times the true error.
+    """
+    out: FloatArray = q_time.copy()
+    kinds = inputs.kinds
+    free = [i for i, k in enumerate(kinds) if k != "rangefinder" and not given[i]]
+    for i in free:
+        for j in (j for j, k in enumerate(kinds) if k != "rangefinder" and j != i):
+            observed = wander_bound(inputs.z[:, i] - inputs.z[:, j], inputs.dt_s)
+            prior = q_time[i] + q_time[j]
+            if math.isfinite(observed) and prior > 0:
+                share = max(observed / prior, Q_AGREEMENT_MIN_SHARE)
+                out[i] = min(out[i], q_time[i] * min(1.0, share))
+    return out
+
+
 def _state_noise(
     inputs: FusionInput, times: FloatArray, given: Mapping[str, float]
 ) -> tuple[FloatArray, dict[str, float]]:
@@ -527,6 +572,7 @@ def _state_noise(
     """
     z, t, kinds, names, speed = inputs.z, inputs.t, inputs.kinds, inputs.names, inputs.speed
     q_time = np.array([given.get(n, Q_OFFSET[k]) for n, k in zip(names, kinds, strict=True)])
+    q_time = _bounded_by_agreement(inputs, q_time, [n in given for n in names])
     q_events = np.tile(q_time, (times.size, 1))
     terrain: dict[str, float] = {}
     ranges = [i for i, k in enumerate(kinds) if k == "rangefinder" and names[i] not in given]
