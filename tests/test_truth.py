@@ -153,3 +153,13 @@ def test_a_temperature_that_follows_the_height_gets_no_coefficient() -> None:
     params = result.runs["smoother"].result.params
     assert str(params["baro_thermal"]).startswith("not modelled")
     assert next(r for r in result.rows if r.name == "smoother").overall.rmse < 0.05
+
+
+def test_a_short_climb_only_log_gets_its_barometer_scale() -> None:
+    """35 s of climb to 65 m and no hold: 5.3 % +- 1.0 %, against 5.4 % from SIM."""
+    result = evaluate(shared_log("truth/quadplane_4.6.0dev_yakupabaci_climb65m.BIN"), ["support"])
+    baro = next(o for o in result.prepared.referred.offsets if o.name == "baro")
+    assert baro.scale == pytest.approx(1.0536, abs=0.006)
+    rows = {r.name: r.overall for r in result.rows}
+    assert rows["baro"].rmse < 0.15  # 1.65 m with an offset only
+    assert rows["support"].rmse < 0.1  # 1.64 m before
