@@ -83,7 +83,7 @@ velocity, bias and each sensor's offset (or ground height), and each sensor's co
 share, per tick, of the total Kalman gain on ``h`` that its accepted samples carried.
 
 Measured (``benchmarks/smoother_accuracy.py``, 66 simulated flights): the lowest RMSE of all
-methods on each; 97.5 % of the true errors within +-2 ``fused_std`` over all. Limits: per flight
+methods on each; 97.3 % of the true errors within +-2 ``fused_std`` over all. Limits: per flight
 that coverage ranges from 0.51 to 1.00. Where GPS and barometer are alone through Paper A's
 excursion, part of it is followed and ``fused_std`` is too small; where the default offset
 random walks overstate a drift (the simulator's barometer has none beyond its temperature),
