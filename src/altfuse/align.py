@@ -214,19 +214,19 @@ class Lag:
 
 
 def estimate_lag(series: Series, reference: Series) -> Lag:
-    """The lag of ``series`` behind ``reference``: the shift of its sample times at which its
-    changes over ``LAG_SPAN_S`` correlate best with the reference's.
+    """The lag of ``series`` behind ``reference``: the shift of its sample times at which the
+    reference best explains its changes over ``LAG_SPAN_S``.
 
     For each candidate lag ``tau``, with ``d`` the change of the series between samples
-    ``LAG_SPAN_S`` apart and ``r`` the reference's change between the same times less ``tau``,
-    the lag maximises ``sum d r`` (the rates' cross-correlation: the reference's noise does not
-    bias it, where a least-squares fit would favour the lags at which interpolation averages
-    neighbouring samples). At that lag, with a free gain ``k`` (a barometer's scale error)::
+    ``LAG_SPAN_S`` apart and ``r`` the reference's change between the same times less ``tau``
+    (the reference averaged over ``LAG_BOX_S`` there), and a free gain ``k`` (a barometer's
+    scale error must not pull the lag)::
 
-        explained = 1 - min_k sum (d - k r)^2 / sum d^2
+        explained(tau) = 1 - min_k sum (d - k r)^2 / sum d^2 = (sum d r)^2 / (sum d^2 sum r^2)
 
-    The lag is kept when it lies inside ``LAG_RANGE_S`` and the reference explains at least
-    ``LAG_MIN_EXPLAINED`` of the changes; otherwise it is 0.
+    The lag is the ``tau`` that maximises it, kept when it lies inside ``LAG_RANGE_S`` and the
+    reference explains at least ``LAG_MIN_EXPLAINED`` of the changes; otherwise it is 0.
+    Windows near a gap in the reference are left out (it would be interpolated across it).
     """
     t, v = merge_duplicates(series.t, series.value)
     rt, rv = merge_duplicates(reference.t, reference.value)
@@ -247,7 +247,7 @@ def estimate_lag(series: Series, reference: Series) -> Lag:
         return Lag(series.name, reference.name, 0.0, None, "not estimated: no motion")
     taus = np.arange(LAG_RANGE_S[0], LAG_RANGE_S[1] + LAG_STEP_S / 2, LAG_STEP_S)
     # the reference's mean over LAG_BOX_S around each time, from its running integral: a point
-    # interpolated between two samples averages their noise, one on a sample does not, and a
+    # interpolated between two samples averages their noise, one on a sample does not, and the
     # fit would favour the lags that fall between samples
     integral = np.concatenate(([0.0], np.cumsum(0.5 * (rv[1:] + rv[:-1]) * np.diff(rt))))
     half = LAG_BOX_S / 2
@@ -304,13 +304,19 @@ def shift(series: Series, lag: Lag) -> Series:
 SPLICE_MIN_GAP_S = 5.0
 
 
+def pauses(t: FloatArray, z: FloatArray, min_s: float) -> list[tuple[int, int]]:
+    """Every pause of at least ``min_s`` [s] in all the sources ``z`` (T, n) on the clock
+    ``t``: the last tick with a value before it and the first after it."""
+    some = np.flatnonzero(np.isfinite(z).any(axis=1))
+    gaps = np.flatnonzero(np.diff(t[some]) >= min_s)
+    return [(int(some[g]), int(some[g + 1])) for g in gaps]
+
+
 def splices(aligned: Aligned, inertial_t: FloatArray | None) -> list[float]:
     """The times [s] at which a new segment of the log starts (see ``SPLICE_MIN_GAP_S``)."""
-    t = aligned.t[np.isfinite(aligned.z).any(axis=1)]
-    gaps = np.flatnonzero(np.diff(t) >= SPLICE_MIN_GAP_S)
-    out = []
-    for g in gaps:
-        lo, hi = t[g] + 1.0, t[g + 1] - 1.0  # the clock's cells and the IMU's last samples
+    t, out = aligned.t, []
+    for before, after in pauses(t, aligned.z, SPLICE_MIN_GAP_S):
+        lo, hi = t[before] + 1.0, t[after] - 1.0  # the clock's cells and the IMU's last samples
         if inertial_t is None or not ((inertial_t > lo) & (inertial_t < hi)).any():
-            out.append(float(t[g + 1]))
+            out.append(float(t[after]))
     return out

@@ -23,7 +23,7 @@ from click.core import ParameterSource
 
 from altfuse import __version__
 from altfuse.batch import EXIT_PARTIAL, SUMMARY, BatchOptions, LogResult, PlotFormat, run_batch
-from altfuse.errors import AltfuseError, ParameterError
+from altfuse.errors import AltfuseError
 from altfuse.evaluation import TRUTHS, TruthChoice, evaluation_table
 from altfuse.evaluation import evaluate as evaluate_log
 from altfuse.fuse import METHODS, params_by_method
@@ -35,7 +35,7 @@ from altfuse.params import UNIT_SUFFIXES, InvalidParameter, fields, flag_of, hin
 from altfuse.pipeline import FuseOptions
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
-from altfuse.write import atomic_outputs, write_json
+from altfuse.write import atomic_outputs, refuse_existing, write_json
 
 EXIT_BUG = 3
 
@@ -168,8 +168,9 @@ def _method_parameter_options() -> list[click.Option]:
         for name, f, _ in used:
             by_default.setdefault(_default_text(f), []).append(name)
         unit = f" [{unit_of(first)}]" if unit_of(first) else ""
-        said = [f"{', '.join(names)} [default: {text}]" for text, names in by_default.items()]
-        said[0] = said[0].replace(" [", f": {first.metadata['help']}{unit} [", 1)
+        (text, names), *rest = by_default.items()
+        said = [f"{', '.join(names)}: {first.metadata['help']}{unit} [default: {text}]"]
+        said += [f"{', '.join(names)} [default: {text}]" for text, names in rest]
         decls, attrs = _option_spec(first, hint, "; ".join(said) + ".", defaults=False)
         if attrs["multiple"]:
             attrs["help"] += " Repeatable."
@@ -262,13 +263,6 @@ def _pipeline_options(command: Callable[..., Any]) -> Callable[..., Any]:
 
 def _force_option(command: Callable[..., Any]) -> Callable[..., Any]:
     return click.option("--force", is_flag=True, help="Overwrite existing outputs.")(command)
-
-
-def _refuse_existing(force: bool, *paths: Path | None) -> None:
-    """An existing output is never overwritten without --force."""
-    for path in paths:
-        if not force and path is not None and path.exists():
-            raise ParameterError(f"{path} exists; --force overwrites it")
 
 
 def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
@@ -397,7 +391,7 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
     """
     if plot_path is not None:
         check_plot_path(plot_path)
-    _refuse_existing(force, json_path, csv_path, plot_path)
+    refuse_existing(force, json_path, csv_path, plot_path)
     chosen = [m.strip() for m in (methods or ",".join(METHODS)).split(",") if m.strip()]
     params = params_by_method(_method_values(options), chosen)
     result = evaluate_log(log, chosen, FuseOptions(params=params, **options), truth, segments)
@@ -617,7 +611,7 @@ def simulate(
       altfuse simulate mission -o mission.bin --seed 1 --duration 180
       altfuse simulate hover -o hover.bin --fault gps-glitch --fault lose-baro
     """
-    _refuse_existing(force, output)
+    refuse_existing(force, output)
     flight = simulate_flight(scenario, seed=seed, duration_s=duration_s, faults=faults)
     n = write_simulated_log(flight, output)
     click.echo(f"{output}: {scenario}, {n} records, {flight.duration_s:g} s, seed {seed}")

@@ -120,7 +120,7 @@ class _Ground:
     seconds: float
     ref: int
     clearances: Mapping[str, float]
-    takeoff: bool
+    real: bool  # before a detected take-off, not the log's first seconds
 
 
 @dataclass(frozen=True)
@@ -146,6 +146,7 @@ class Referred:
     offsets: tuple[Offset, ...]
     dropped: dict[str, str]
     segments: tuple[Segment, ...] = ()  # empty: the log is one segment
+    on_real_ground: bool = False  # the ground window lies before a detected take-off
 
     @property
     def on_ground_s(self) -> tuple[float, float] | None:
@@ -259,7 +260,7 @@ def refer_to_takeoff(
                     h[a:b, j] = own.h[:, own.names.index(name)]
             how = f"its own, ground before take-off at {own.takeoff_s:.1f} s"
         else:
-            for j, o in zip(range(len(columns)), first.offsets, strict=True):
+            for j, o in enumerate(first.offsets):
                 h[a:b, j] = (part.z[:, columns[j]] - o.offset_m) / o.scale
             how = "the main segment's offsets (no take-off in it)"
         ticks = t[a:b][valid[a:b]]
@@ -280,8 +281,7 @@ def _own_datum(
         own = _refer_segment(part, ground_window_s, takeoff_climb_m, referral, clearances)
     except NoUsableSensorsError:
         return None
-    on_ground = any(o.method.startswith("median over the ground") for o in own.offsets)
-    return own if own.takeoff_s is not None and on_ground else None
+    return own if own.on_real_ground else None
 
 
 def _refer_segment(
@@ -315,6 +315,7 @@ def _refer_segment(
     ref_valid = np.isfinite(z[:, ref])
     takeoff = detect_takeoff(t, z[:, ref], aligned.rate_hz, ground_s, climb_m)
     window = np.zeros(t.size, dtype=bool)
+    real = False
     if takeoff is None:
         ground_how = "first seconds of the log (no take-off found)"
     elif t[ref_valid][0] >= takeoff - TAKEOFF_MARGIN_S:
@@ -323,16 +324,15 @@ def _refer_segment(
         end = takeoff - TAKEOFF_MARGIN_S
         window = (t >= end - ground_s) & (t <= end)
         ground_how = f"ground before take-off at {takeoff:.1f} s"
-        if not (window & ref_valid).any():
+        real = bool((window & ref_valid).any())
+        if not real:
             ground_how = "first seconds of the log (no reference sample before take-off)"
     if not (window & ref_valid).any():
         window = _first_seconds(ref_valid, t, ground_s)
     win_idx = np.flatnonzero(window & ref_valid)
     ground_window = (float(t[win_idx[0]]), float(t[win_idx[-1]]))
 
-    ground = _Ground(
-        window, ground_how, ground_s, ref, dict(clearances or {}), ground_how.startswith("ground")
-    )
+    ground = _Ground(window, ground_how, ground_s, ref, dict(clearances or {}), real)
     offsets, h, dropped = _refer(aligned, ground, {})
     if referral == "full":
         scales = baro_scales(aligned, h, offsets)
@@ -353,6 +353,7 @@ def _refer_segment(
         ground_window_s=ground_window,
         offsets=tuple(offsets[i] for i in keep),
         dropped=dropped,
+        on_real_ground=real,
     )
 
 
@@ -372,7 +373,7 @@ def _refer(
         on_ground = ground.window & valid
         if on_ground.sum() >= MIN_WINDOW_TICKS or (i == ref and on_ground.any()):
             sel, base, how = on_ground, np.zeros_like(t), f"median over the {ground.how}"
-        elif name in ground.clearances and ground.takeoff:
+        elif name in ground.clearances and ground.real:
             clearance = ground.clearances[name]
             how = f"its ground clearance, {clearance:.2f} m (no valid reading on the ground)"
             offsets[i] = Offset(name, clearance, how, None, 0)

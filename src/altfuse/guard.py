@@ -61,14 +61,18 @@ def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
     f = result.tick_traces.get("fused_std", np.zeros(fused.size))
     limit = np.maximum(FLOOR_M, SIGMAS * np.sqrt(s**2 + np.nan_to_num(f) ** 2))
     beyond = np.nan_to_num(away) > limit
-    flagged = _long_runs(beyond, round(MIN_S / inputs.dt_s))
+    long_enough = max(1, round(MIN_S / inputs.dt_s))
+    spans = [(a, b) for a, b in _runs(beyond) if b - a >= long_enough]
+    flagged = np.zeros(fused.size, dtype=bool)
+    for a, b in spans:
+        flagged[a:b] = True
     record = {
         "floor_m": FLOOR_M,
         "sigmas": SIGMAS,
         "min_s": MIN_S,
         "diverged_ticks": int(flagged.sum()),
         "max_excursion_m": float(np.nanmax(away)) if np.isfinite(away).any() else 0.0,
-        "spans_s": _spans(inputs.t, flagged),
+        "spans_s": [[float(inputs.t[a]), float(inputs.t[b - 1])] for a, b in spans],
     }
     if not flagged.any():
         return Guarded(result, record)
@@ -83,16 +87,7 @@ def _edge_sensor(fused: FloatArray, z: FloatArray) -> np.ndarray:
     return np.where(np.isfinite(distance.min(axis=1)), nearest, -1)
 
 
-def _long_runs(mask: np.ndarray, ticks: int) -> np.ndarray:
-    """``mask`` kept only in its runs of at least ``ticks`` ticks."""
-    out = np.zeros(mask.size, dtype=bool)
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The runs of ``mask`` as (start, stop) index pairs."""
     edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
-    for start, stop in zip(edges[::2], edges[1::2], strict=True):
-        if stop - start >= max(ticks, 1):
-            out[start:stop] = True
-    return out
-
-
-def _spans(t: FloatArray, mask: np.ndarray) -> list[list[float]]:
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
-    return [[float(t[a]), float(t[b - 1])] for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]

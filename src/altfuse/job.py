@@ -15,7 +15,14 @@ from altfuse.fuse import params_for
 from altfuse.params import fields
 from altfuse.pipeline import FuseOptions, FuseRun, fuse_log, prepare_log, run_method
 from altfuse.plot import check_plot_path, run_figure, writer
-from altfuse.write import Writer, default_meta_path, fused_table, write_json, write_outputs
+from altfuse.write import (
+    Writer,
+    default_meta_path,
+    fused_table,
+    refuse_existing,
+    write_json,
+    write_outputs,
+)
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -54,8 +61,7 @@ class Outputs:
         for target in self.paths():
             if log_path.exists() and target.resolve() == log_path.resolve():
                 raise ParameterError(f"{target} is the input log; choose another output path")
-            if not force and target.exists():
-                raise ParameterError(f"{target} exists; --force overwrites it")
+        refuse_existing(force, *self.paths())
 
 
 @dataclass(frozen=True)

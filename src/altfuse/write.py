@@ -17,6 +17,8 @@ from typing import IO, TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
+from altfuse.errors import ParameterError
+
 if TYPE_CHECKING:
     from altfuse.pipeline import FuseRun
 
@@ -98,6 +100,13 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
         raise
     for tmp, target in staged:
         os.replace(tmp, target)
+
+
+def refuse_existing(force: bool, *paths: Path | None) -> None:
+    """An existing output is never overwritten without ``force`` (``--force``)."""
+    for path in paths:
+        if not force and path is not None and path.exists():
+            raise ParameterError(f"{path} exists; --force overwrites it")
 
 
 def write_json(data: Any) -> Writer:

@@ -55,11 +55,13 @@ auto-covariance ``R_pp`` (no cross-covariance to subtract).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 
+from altfuse.align import pauses
 from altfuse.fuse.base import FusionInput, FusionResult, combine
 from altfuse.model import FloatArray
 from altfuse.params import Params, param
@@ -205,14 +207,10 @@ def spatial_weights(pplus: FloatArray, valid: FloatArray) -> FloatArray:
         return np.where(total > 0, inv / total, np.nan)
 
 
-def _stretches(z: FloatArray, ticks: int) -> list[slice]:
-    """The parts of the clock between pauses of at least ``ticks`` in every sensor."""
-    some = np.flatnonzero(np.isfinite(z).any(axis=1))
-    if not some.size:
-        return [slice(0, z.shape[0])]
-    cuts = some[1:][np.diff(some) >= ticks]
-    starts = [0, *cuts.tolist()]
-    return [slice(a, b) for a, b in zip(starts, [*cuts.tolist(), z.shape[0]], strict=True)]
+def _stretches(t: FloatArray, z: FloatArray) -> list[slice]:
+    """The parts of the clock between pauses of ``RESTART_S`` or more in every sensor."""
+    cuts = [after for _, after in pauses(t, z, RESTART_S)]
+    return [slice(a, b) for a, b in itertools.pairwise([0, *cuts, z.shape[0]])]
 
 
 def layer1(inputs: FusionInput, steps: int, params: DelayParams) -> FusionResult:
@@ -220,7 +218,7 @@ def layer1(inputs: FusionInput, steps: int, params: DelayParams) -> FusionResult
     z, form = inputs.z, params.form
     q = params.q_m2_s * inputs.dt_s
     delta2, zplus, pplus = (np.full(z.shape, np.nan) for _ in range(3))
-    for part in _stretches(z, round(RESTART_S / inputs.dt_s)):
+    for part in _stretches(inputs.t, z):
         delta2[part] = measurement_variances(z[part])
         zplus[part], pplus[part] = temporal_fusion(z[part], delta2[part], steps, form, q)
     valid = np.isfinite(z)

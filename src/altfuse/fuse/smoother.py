@@ -56,7 +56,7 @@ From the log itself:
 - whether a barometer drifts: a second forward pass with a drift rate ``r`` on each barometer's
   offset (``c += r dt``, ``r`` a random walk of density ``Q_DRIFT``), kept if it raises the
   log-likelihood of the samples both passes accept by more than ``DRIFT_GAIN`` (a likelihood-ratio
-  test at 0.1 %) and rejects no more samples (:func:`_drift_gain`). A ramp (0.05 m/s) is then
+  test at 0.1 %) and rejects no more samples (:func:`_evidence_gain`). A ramp (0.05 m/s) is then
   told from the GPS's wander even with no third sensor (hover RMSE 2.36 m -> 0.23 m), and a
   barometer that does not drift keeps its stable offset (a drift rate it does not need lets the
   height wander where GPS and barometer are alone).
@@ -98,6 +98,7 @@ in the number of events: one forward and one backward step each.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -401,7 +402,7 @@ def _run(ev: _Events, r: FloatArray, layout: _Layout, smooth: bool = True) -> di
     """Forward filter and (if ``smooth``) RTS pass over the events: the states and diagnostics.
 
     ``r`` is each event's measurement variance. Also each accepted sample's log-likelihood (its
-    innovation's density; NaN elsewhere): the evidence by which :func:`_drift_gain` compares two
+    innovation's density; NaN elsewhere): the evidence by which :func:`_evidence_gain` compares two
     models.
     """
     sign, tstate, drifts = layout.sign, layout.thermal, layout.drift_pairs
@@ -465,7 +466,7 @@ def _run(ev: _Events, r: FloatArray, layout: _Layout, smooth: bool = True) -> di
     return {"x": xf, "p": pf, "gain_h": gain_h, "accepted": accepted, "loglik": loglik}
 
 
-def _drift_gain(without: dict[str, np.ndarray], with_drift: dict[str, np.ndarray]) -> float:
+def _evidence_gain(without: dict[str, np.ndarray], richer: dict[str, np.ndarray]) -> float:
     """Log-likelihood gain of the richer model (barometer drift rates, temperature
     coefficients) over the one without, over the samples both accept; ``-inf`` if it accepts
     fewer samples in all, beyond ``EVIDENCE_SLACK`` of them.
@@ -477,15 +478,18 @@ def _drift_gain(without: dict[str, np.ndarray], with_drift: dict[str, np.ndarray
     94 samples of a rangefinder returning from a dropout, on flights where it had gone astray.
     """
     slack = EVIDENCE_SLACK * without["accepted"].sum()
-    if with_drift["accepted"].sum() < without["accepted"].sum() - slack:
+    if richer["accepted"].sum() < without["accepted"].sum() - slack:
         return -math.inf
-    both = without["accepted"] & with_drift["accepted"]
-    return float(np.sum(with_drift["loglik"][both]) - np.sum(without["loglik"][both]))
+    both = without["accepted"] & richer["accepted"]
+    return float(np.sum(richer["loglik"][both]) - np.sum(without["loglik"][both]))
 
 
-def _thermal_evidence(physical: _Events, r: FloatArray, layout: _Layout) -> tuple[_Layout, float]:
+def _thermal_evidence(
+    physical: _Events, r: FloatArray, layout: _Layout
+) -> tuple[_Layout, float, dict[str, np.ndarray] | None]:
     """``layout`` with the barometers' temperature coefficients where the log's evidence asks
-    for them, and that evidence (the log-likelihood gain, NaN without a temperature).
+    for them, that evidence (the log-likelihood gain, NaN without a temperature), and the
+    forward pass of the layout chosen (None without a temperature).
 
     In a simulator's standard atmosphere the temperature follows the height, and a coefficient
     on it is a second, wrong scale (three climbs: 0.09-0.29 m RMSE with it, 0.01-0.04 m
@@ -495,10 +499,31 @@ def _thermal_evidence(physical: _Events, r: FloatArray, layout: _Layout) -> tupl
     ``--offset-noise baro=0.001``: 0.40 m RMSE without it, 0.06 m with).
     """
     if not (layout.thermal >= 0).any():
-        return layout, math.nan
+        return layout, math.nan, None
     plain = layout.without_thermal()
-    gain = _drift_gain(_run(physical, r, plain, False), _run(physical, r, layout, False))
-    return (layout if gain > DRIFT_GAIN else plain), gain
+    without, richer = _run(physical, r, plain, False), _run(physical, r, layout, False)
+    gain = _evidence_gain(without, richer)
+    return (layout, gain, richer) if gain > DRIFT_GAIN else (plain, gain, without)
+
+
+def _drift_evidence(
+    ev: _Events,
+    r: FloatArray,
+    layout: _Layout,
+    kinds: Sequence[str],
+    stable: dict[str, np.ndarray] | None,
+) -> tuple[_Layout, float]:
+    """``layout`` with a drift rate on each barometer's offset where the log's evidence asks
+    for it, and that evidence (NaN without a barometer); ``stable`` is ``layout``'s forward pass
+    if one was already run with these events."""
+    if "baro" not in kinds:
+        return layout, math.nan
+    drifting = layout.with_drift(kinds)
+    gain = _evidence_gain(
+        stable if stable is not None else _run(ev, r, layout, False),
+        _run(ev, r, drifting, False),
+    )
+    return (drifting if gain > DRIFT_GAIN else layout), gain
 
 
 def _drift_record(layout: _Layout, gain: float) -> dict[str, float | int | str]:
@@ -548,10 +573,14 @@ def _bounded_by_agreement(
     """
     out: FloatArray = q_time.copy()
     kinds = inputs.kinds
-    free = [i for i, k in enumerate(kinds) if k != "rangefinder" and not given[i]]
-    for i in free:
-        for j in (j for j, k in enumerate(kinds) if k != "rangefinder" and j != i):
-            observed = wander_bound(inputs.z[:, i] - inputs.z[:, j], inputs.dt_s)
+    steady = [i for i, k in enumerate(kinds) if k != "rangefinder"]
+    bound = {
+        (i, j): wander_bound(inputs.z[:, i] - inputs.z[:, j], inputs.dt_s)
+        for i, j in itertools.combinations(steady, 2)
+    }
+    for i in (i for i in steady if not given[i]):
+        for j in (j for j in steady if j != i):
+            observed = bound[min(i, j), max(i, j)]
             prior = q_time[i] + q_time[j]
             if math.isfinite(observed) and prior > 0:
                 share = max(observed / prior, Q_AGREEMENT_MIN_SHARE)
@@ -721,16 +750,11 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     physical = ev
     if params.offset_noise_m2_s:
         physical = replace(ev, q_state=_state_noise(inputs, times, {})[0])
-    layout, thermal_gain = _thermal_evidence(physical, noise.r(who), layout)
-    # a barometer that drifts: its offset gets a drift rate if the log's evidence asks for it
-    drift_gain = math.nan
-    if "baro" in kinds:
-        drifting = layout.with_drift(kinds)
-        drift_gain = _drift_gain(
-            _run(ev, noise.r(who), layout, False), _run(ev, noise.r(who), drifting, False)
-        )
-        if drift_gain > DRIFT_GAIN:
-            layout = drifting
+    layout, thermal_gain, chosen = _thermal_evidence(physical, noise.r(who), layout)
+    # the thermal test's pass of the layout chosen, where it was made with these noises
+    layout, drift_gain = _drift_evidence(
+        ev, noise.r(who), layout, kinds, chosen if physical is ev else None
+    )
     for npass in range(EM_PASSES + 1):
         out = _run(ev, noise.r(who), layout)
         if npass == EM_PASSES:
