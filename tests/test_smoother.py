@@ -15,16 +15,15 @@ from click.testing import CliRunner
 
 from altfuse.cli import cli
 from altfuse.fuse import FusionInput
-from altfuse.fuse.smoother import (
-    DRIFT_GAIN,
-    LOCKOUT_S,
+from altfuse.fuse.smoother import SmootherParams, fuse_smoother
+from altfuse.fuse.smoother.evidence import DRIFT_GAIN
+from altfuse.fuse.smoother.noise import (
     Q_AGREEMENT_MIN_SHARE,
-    SmootherParams,
-    fuse_smoother,
     measurement_sigma,
     terrain_noise,
     wander_bound,
 )
+from altfuse.fuse.smoother.passes import LOCKOUT_S
 from altfuse.params import InvalidParameter
 from altfuse.simulate import simulate_flight, write_simulated_log
 from conftest import ROOT

@@ -1,0 +1,223 @@
+"""The smoother's noises from the log: each sensor's measurement noise (local, scaled by EM), the
+accelerometer's, the offsets' random walks bounded by the sensors' agreement, and a
+rangefinder's terrain per metre flown."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from altfuse.fuse.base import FusionInput
+from altfuse.fuse.smoother.events import interval_mean
+from altfuse.fuse.smoother.model import Events, Layout
+from altfuse.metrics import MAD_TO_SIGMA, mad_sigma, white_noise_sigma
+from altfuse.model import FloatArray, Samples
+
+#: White acceleration noise densities [m^2/s^3]: the default, its floor with the accelerometer,
+#: and without it.
+Q_ACCEL = 0.05
+Q_ACCEL_MIN = 1e-3
+Q_ACCEL_NO_IMU = 2.0
+#: Offset random walks [m^2/s] for GPS and barometer, and for a rangefinder's ground height when
+#: the horizontal speed is unknown.
+Q_OFFSET = {"gps": 0.01, "baro": 1e-4, "rangefinder": 0.3}
+#: Ground height under a moving vehicle: random walk per metre flown [m^2/m] when the log cannot
+#: tell, and its floor in time [m^2/s] (grass, waves: about 3 cm over 100 s).
+Q_TERRAIN_PER_M = 0.05
+Q_GROUND_STILL = 1e-5
+Q_TERRAIN_MAX = 1.0
+MAX_SPEED_M_S = 100.0
+#: The spans [s] over which two sensors' agreement is measured, and the least share of the
+#: default random walks it may leave (a floor: two simulated sensors can agree exactly).
+AGREEMENT_LAGS_S = (2.0, 5.0, 10.0, 20.0, 40.0)
+Q_AGREEMENT_MIN_SHARE = 1e-2
+#: Window [s] of the local measurement-noise estimate.
+NOISE_WINDOW_S = 5.0
+_MIN_SIGMA_M = 0.01
+
+
+def measurement_sigma(z: FloatArray) -> float:
+    """Noise of one sensor [m] from the median absolute second difference of its samples."""
+    if z.size < 5:
+        return 1.0
+    return max(white_noise_sigma(z), _MIN_SIGMA_M)
+
+
+def accel_psd(t: FloatArray, a: FloatArray) -> float:
+    """White-noise density of the vertical acceleration [m^2/s^3]: the spread of its first
+    differences (``sigma = 1.4826 MAD(d a) / sqrt(2)``) times the sampling interval, floored at
+    ``Q_ACCEL_MIN`` (vibration and attitude errors the spread does not show)."""
+    if a.size < 10:
+        return Q_ACCEL
+    sigma = mad_sigma(np.diff(a)) / math.sqrt(2.0)
+    return max(sigma**2 * float(np.median(np.diff(t))), Q_ACCEL_MIN)
+
+
+def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) -> FloatArray:
+    """Noise of one sensor at each of its samples [m]: :func:`measurement_sigma` over a running
+    window of ``window_s`` (sensors get noisier and quieter within a flight)."""
+    if z.size < 5:
+        return np.full(z.size, measurement_sigma(z))
+    d2 = np.abs(np.diff(z, 2))
+    d2 = np.concatenate(([d2[0]], d2, [d2[-1]]))
+    width = max(5, round(window_s / float(np.median(np.diff(t)) or 1.0)))
+    med = pd.Series(d2).rolling(width, center=True, min_periods=3).median().to_numpy()
+    return np.asarray(np.maximum(MAD_TO_SIGMA * med / math.sqrt(6.0), _MIN_SIGMA_M))
+
+
+def terrain_noise(d: FloatArray, flown: FloatArray, lag: int) -> float:
+    """Ground-height random walk per metre flown [m^2/m], by method of moments; NaN if unknown.
+
+    ``d`` is another sensor minus a rangefinder on the clock (the ground height plus both
+    sensors' errors), ``flown`` the distance flown [m] on the clock. Over ``lag`` ticks the
+    squared change of ``d`` is ``q dx + const`` (``const``: the noise, and drift too slow to
+    matter over the lag): regressed on the distance ``dx`` flown meanwhile.
+    """
+    if d.size <= lag:
+        return math.nan
+    dd, dx = d[lag:] - d[:-lag], flown[lag:] - flown[:-lag]
+    ok = np.isfinite(dd) & np.isfinite(dx)
+    if (ok & (dx > 1.0)).sum() < 10 or (ok & (dx <= 1.0)).sum() < 10:
+        return math.nan
+    design = np.column_stack([dx[ok], np.ones(ok.sum())])
+    slope = float(np.linalg.lstsq(design, dd[ok] ** 2, rcond=None)[0][0])
+    return max(slope, 0.0)
+
+
+def wander_bound(d: FloatArray, dt: float) -> float:
+    """An upper bound [m^2/s] on the random-walk density of ``d`` on a clock of step ``dt``:
+    ``Var(d(t + L) - d(t)) = q L + 2 sigma^2 >= q L``, so ``q <= Var_L / L`` at every span
+    ``L`` of AGREEMENT_LAGS_S (each variance robust, from the MAD); the least of them. Noise
+    only loosens it: beyond its sampling error it never claims that two sensors agree better
+    than they do. NaN when the difference is too short."""
+    bounds = []
+    for lag in AGREEMENT_LAGS_S:
+        k = max(1, round(lag / dt))
+        inc = d[k:] - d[:-k] if d.size > k else np.zeros(0)
+        inc = inc[np.isfinite(inc)]
+        if inc.size >= 20:
+            bounds.append(mad_sigma(inc) ** 2 / (k * dt))
+    return min(bounds) if bounds else math.nan
+
+
+def bounded_by_agreement(
+    inputs: FusionInput, q_time: FloatArray, given: Sequence[bool]
+) -> FloatArray:
+    """GPS and barometer offsets' random walks no looser than the sensors' agreement allows.
+
+    Two sensors' offsets wander apart at the sum of their densities, which their difference
+    bounds from above (:func:`wander_bound`); each one's can be no larger. A pair that agrees better
+    than the defaults' sum scales both defaults down in their ratio (the prior's preference of a
+    stable barometer over a wandering GPS stays); never up. In the simulators' logs a GPS and a
+    scaled barometer agree to a centimetre over minutes, where the defaults allow a metre and
+    gave a fused_std five to twenty times the true error.
+    """
+    out: FloatArray = q_time.copy()
+    kinds = inputs.kinds
+    steady = [i for i, k in enumerate(kinds) if k != "rangefinder"]
+    bound = {
+        (i, j): wander_bound(inputs.z[:, i] - inputs.z[:, j], inputs.dt_s)
+        for i, j in itertools.combinations(steady, 2)
+    }
+    for i in (i for i in steady if not given[i]):
+        for j in (j for j in steady if j != i):
+            observed = bound[min(i, j), max(i, j)]
+            prior = q_time[i] + q_time[j]
+            if math.isfinite(observed) and prior > 0:
+                share = max(observed / prior, Q_AGREEMENT_MIN_SHARE)
+                out[i] = min(out[i], q_time[i] * min(1.0, share))
+    return out
+
+
+def state_noise(
+    inputs: FusionInput, times: FloatArray, given: Mapping[str, float]
+) -> tuple[FloatArray, dict[str, float]]:
+    """Random-walk densities of the sensor states over each event interval (events, m), and each
+    rangefinder's terrain roughness [m^2/m] by name, for the record.
+
+    ``given`` (by sensor name) overrides. GPS and barometer offsets: ``Q_OFFSET``, constant. A
+    rangefinder's ground height changes as the vehicle flies over the ground: ``q dx`` per
+    distance ``dx`` flown (``q`` by :func:`terrain_noise` against the quietest other sensor) plus
+    ``Q_GROUND_STILL`` in time; without a speed, ``Q_OFFSET["rangefinder"]`` in time.
+    """
+    z, t, kinds, names, speed = inputs.z, inputs.t, inputs.kinds, inputs.names, inputs.speed
+    q_time = np.array([given.get(n, Q_OFFSET[k]) for n, k in zip(names, kinds, strict=True)])
+    q_time = bounded_by_agreement(inputs, q_time, [n in given for n in names])
+    q_events = np.tile(q_time, (times.size, 1))
+    terrain: dict[str, float] = {}
+    ranges = [i for i, k in enumerate(kinds) if k == "rangefinder" and names[i] not in given]
+    if speed is None or speed.t.size < 2 or not ranges:
+        return q_events, terrain
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.1
+    v = Samples(speed.t, np.clip(speed.value, 0.0, MAX_SPEED_M_S))
+    flown_speed = interval_mean(v, t)
+    flown = np.cumsum(np.nan_to_num(flown_speed) * np.diff(t, prepend=t[0]))
+    flown[np.isnan(flown_speed)] = np.nan
+    # outside the speed's span (a GPS lost in flight) the last known speed is held
+    speed_events = pd.Series(interval_mean(v, times)).ffill().bfill().to_numpy()
+    noise = [measurement_sigma(col[np.isfinite(col)]) for col in z.T]
+    others = [j for j, k in enumerate(kinds) if k != "rangefinder"]
+    for i in ranges:
+        q_m = math.nan
+        if others:
+            j = min(others, key=lambda j: noise[j])
+            q_m = terrain_noise(z[:, j] - z[:, i], flown, max(1, round(1.0 / dt)))
+        q_m = Q_TERRAIN_PER_M if not math.isfinite(q_m) else min(q_m, Q_TERRAIN_MAX)
+        terrain[names[i]] = q_m
+        moving = q_m * speed_events + Q_GROUND_STILL
+        q_events[:, i] = np.where(np.isfinite(speed_events), moving, q_time[i])
+    return q_events, terrain
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Each event's measurement variance as ``base * scale[sensor]``: ``base`` the local noise
+    of its sensor squared, ``scale`` refined by EM except for the sensors in ``fixed``."""
+
+    base: FloatArray
+    scale: FloatArray
+    fixed: np.ndarray
+
+    def r(self, who: np.ndarray) -> FloatArray:
+        r: FloatArray = self.base * self.scale[np.maximum(who, 0)]
+        return r
+
+
+def measurement_noise(
+    inputs: FusionInput, given: Mapping[str, float], who: np.ndarray, position: np.ndarray
+) -> Noise:
+    """Each sample's variance: the local noise of its sensor (or ``given``), scale 1."""
+    local = [
+        np.full(s.value.size, given[name]) if name in given else local_sigma(*s)
+        for name, s in zip(inputs.names, inputs.samples, strict=True)
+    ]
+    base = np.ones(who.size)
+    for i in range(len(inputs.samples)):
+        mine = who == i
+        base[mine] = local[i][position[mine]] ** 2
+    fixed = np.array([name in given for name in inputs.names])
+    return Noise(base, np.ones(len(inputs.samples)), fixed)
+
+
+def em_scale(ev: Events, layout: Layout, noise: Noise, out: dict[str, np.ndarray]) -> None:
+    """EM, M-step: each sensor's noise scale from the smoothed residuals (in place)."""
+    xs, ps = out["x"], out["p"]
+    tstate, sign, dtemp = layout.thermal, layout.sign, layout.dtemp
+    for i in range(sign.size):
+        mine = (ev.who == i) & out["accepted"]
+        if noise.fixed[i] or not mine.any():
+            continue
+        # the measurement model's rows at these events: coefficients on (h, c_i, k_i)
+        cols = [0, 3 + i] + ([int(tstate[i])] if tstate[i] >= 0 else [])
+        coef = np.column_stack(
+            [np.ones(mine.sum()), np.full(mine.sum(), sign[i])]
+            + ([dtemp[mine]] if tstate[i] >= 0 else [])
+        )
+        resid = ev.z[mine] - np.einsum("ka,ka->k", coef, xs[mine][:, cols])
+        var_h = np.einsum("ka,kab,kb->k", coef, ps[mine][:, cols][:, :, cols], coef)
+        noise.scale[i] = max(float(np.mean((resid**2 + var_h) / noise.base[mine])), 1e-4)
