@@ -1,9 +1,10 @@
 """The smoother's Kalman and Rauch-Tung-Striebel passes against filterpy's (issue 15, item 8).
 
-A linear-Gaussian toy with the smoother's own state layout (height, velocity, accelerometer bias,
-two sensor offsets, a barometer's drift rate), irregular event times, one scalar measurement of
-either sensor per event or none (a clock tick), no gate: :func:`passes.run` must give filterpy's
-``KalmanFilter.batch_filter`` and ``rts_smoother`` to 1e-9.
+A linear-Gaussian toy with the smoother's own state layout (height, velocity, accelerometer
+bias, two sensor offsets, a barometer's scale error and drift rate), irregular event times, one
+scalar measurement of either sensor per event or none (a clock tick), no gate:
+:func:`passes.run` must give filterpy's ``KalmanFilter.batch_filter`` and ``rts_smoother`` to
+1e-9.
 """
 
 from __future__ import annotations
@@ -12,7 +13,14 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter, rts_smoother
 
-from altfuse.fuse.smoother.model import Events, Layout, prior, process_noise, transition
+from altfuse.fuse.smoother.model import (
+    Events,
+    Layout,
+    Regressor,
+    prior,
+    process_noise,
+    transition,
+)
 from altfuse.fuse.smoother.passes import run
 
 M = 2  # sensors: a GPS and a barometer, the barometer with a drift rate
@@ -32,7 +40,8 @@ def toy(seed: int, accel: bool) -> tuple[Events, Layout, np.ndarray]:
     q_state = np.tile([0.01, 1e-4], (count, 1))
     still = np.zeros(count, dtype=bool)
     events = Events(t, who, z, a, q_state, still, 0.05, True, np.inf, float(z[who >= 0][0]))
-    layout = Layout(np.ones(M), np.full(M, -1), np.zeros(count), np.array([-1, 3 + M]))
+    scale = Regressor("scale", 1, np.where(who == 1, truth, 0.0), 0.02)
+    layout = Layout(np.ones(M), (scale,), drifting=(1,))
     return events, layout, r
 
 
@@ -47,11 +56,13 @@ def filterpy_passes(
     us = [np.array([[0.5 * ev.a[k] * dt * dt], [ev.a[k] * dt]]) for k, dt in enumerate(dts)]
     bs = [np.vstack([np.eye(2), np.zeros((n - 2, 2))])] * ev.t.size
     hs = []
-    for i in ev.who:
+    for k, i in enumerate(ev.who):
         row = np.zeros((1, n))
         row[0, 0] = 1.0
         if i >= 0:
             row[0, 3 + i] = 1.0
+        if i == 1:  # the barometer's scale error, times its height
+            row[0, 3 + M] = layout.regressors[0].coef[k]
         hs.append(row)
     zs = [np.array([z]) if i >= 0 else None for i, z in zip(ev.who, ev.z, strict=True)]
     kf = KalmanFilter(dim_x=n, dim_z=1, dim_u=2)

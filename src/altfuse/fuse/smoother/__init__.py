@@ -113,7 +113,7 @@ import numpy as np
 from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult
 from altfuse.fuse.smoother.events import contributions, interval_mean, merge_events
 from altfuse.fuse.smoother.evidence import drift_evidence, drift_record, thermal_evidence
-from altfuse.fuse.smoother.model import Events, Layout, thermal_layout
+from altfuse.fuse.smoother.model import Events, Layout, thermal_regressors
 from altfuse.fuse.smoother.noise import (
     Q_ACCEL_NO_IMU,
     Q_OFFSET,
@@ -193,9 +193,8 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         a = np.nan_to_num(interval_mean(accel, times))
     first = [s.value[0] for s in samples if s.value.size]
     h0 = float(np.median(first)) if first else 0.0
-    tstate, dtemp = thermal_layout(inputs.temperatures, samples, who, position, m)
     sign = np.array([-1.0 if k == "rangefinder" else 1.0 for k in kinds])
-    layout = Layout(sign, tstate, dtemp, np.full(m, -1))
+    layout = Layout(sign, tuple(thermal_regressors(inputs.temperatures, samples, who, position)))
     q_events, terrain = state_noise(inputs, times, params.offset_noise_m2_s)
     ev = Events(times, who, values, a, q_events, still, q_accel, use_imu, params.gate_sigma, h0)
     physical = ev
@@ -238,7 +237,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
                 if math.isnan(thermal_gain)
                 else {
                     "baro_thermal": "modelled"
-                    if (layout.thermal >= 0).any()
+                    if layout.has("thermal")
                     else "not modelled (the log's evidence does not ask for it)",
                     "baro_thermal_loglik_gain": thermal_gain,
                 }
@@ -253,14 +252,18 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     )
 
 
+#: How each regressor is recorded: the key's pattern and unit.
+_RECORD = {"thermal": "thermal_{}_m_per_degC", "scale": "scale_error_{}", "lag": "lag_{}_s"}
+
+
 def _fitted(
     names: Sequence[str], ev: Events, noise: Noise, layout: Layout, last: FloatArray
 ) -> dict[str, float]:
     """What the smoother learnt of each sensor, for the record: its noise (the median over its
-    samples), its offset's random walk (the median over the flight) and a barometer's
-    temperature coefficient."""
+    samples), its offset's random walk (the median over the flight) and its regressors (a
+    barometer's temperature coefficient, ...)."""
     sensor_q = np.median(ev.q_state, axis=0)
-    who, tstate = ev.who, layout.thermal
+    who = ev.who
     return {
         **{
             f"sigma_{name}_m": float(np.median(np.sqrt(noise.base[who == i] * noise.scale[i])))
@@ -269,9 +272,8 @@ def _fitted(
         },
         **{f"q_offset_{name}_m2_s": float(sensor_q[i]) for i, name in enumerate(names)},
         **{
-            f"thermal_{name}_m_per_degC": float(last[tstate[i]])
-            for i, name in enumerate(names)
-            if tstate[i] >= 0
+            _RECORD[r.name].format(names[r.sensor]): float(last[layout.index(j)])
+            for j, r in enumerate(layout.regressors)
         },
     }
 

@@ -52,9 +52,9 @@ def thermal_evidence(
     explains, and the test would drop a model the flight needs (the sample hover with
     ``--offset-noise baro=0.001``: 0.40 m RMSE without it, 0.06 m with).
     """
-    if not (layout.thermal >= 0).any():
+    if not layout.has("thermal"):
         return layout, math.nan, None
-    plain = layout.without_thermal()
+    plain = layout.without("thermal")
     without, richer = run(physical, r, plain, False), run(physical, r, layout, False)
     gain = evidence_gain(without, richer)
     return (layout, gain, richer) if gain > DRIFT_GAIN else (plain, gain, without)
@@ -86,5 +86,5 @@ def drift_record(layout: Layout, gain: float) -> dict[str, float | int | str]:
         return {}
     if not math.isfinite(gain):
         return {"baro_drift": "not modelled (it rejected more samples than the stable model)"}
-    verdict = "modelled" if (layout.drift >= 0).any() else "not modelled"
+    verdict = "modelled" if layout.drifting else "not modelled"
     return {"baro_drift": verdict, "baro_drift_loglik_gain": gain}

@@ -5,7 +5,8 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 
@@ -23,57 +24,81 @@ Q_DRIFT = 1e-5
 STILL_SIGMA = 0.02
 
 
-def thermal_layout(
+@dataclass(frozen=True)
+class Regressor:
+    """A constant state that enters one sensor's measurement as ``coef * state``, with a
+    zero-mean prior of standard deviation ``prior``: a barometer's temperature coefficient
+    (``coef``: its temperature change [degC]), its scale error (``coef``: its own height [m]), a
+    sensor's lag left after the datum's (``coef``: minus the vertical velocity [m/s])."""
+
+    name: Literal["thermal", "scale", "lag"]
+    sensor: int
+    coef: FloatArray  # per event; read at the sensor's own samples only
+    prior: float
+
+
+def thermal_regressors(
     temperatures: Sequence[Samples | None],
     samples: Sequence[Samples],
     who: np.ndarray,
     position: np.ndarray,
-    m: int,
-) -> tuple[np.ndarray, FloatArray]:
-    """Each sensor's temperature-coefficient state index (-1: none) and each event's temperature
-    less the sensor's first one [degC] (0 for the others)."""
-    tstate = np.full(m, -1)
-    dtemp = np.zeros(who.size)
+) -> list[Regressor]:
+    """A temperature coefficient for each sensor with a logged temperature: ``coef`` its
+    temperature less its first one [degC]."""
+    out = []
     for i, temp in enumerate(temperatures):
         if temp is None or temp[0].size < 2 or not samples[i][0].size:
             continue
         order = np.argsort(temp[0], kind="stable")
         at_samples = np.interp(samples[i][0], temp[0][order], temp[1][order])
-        tstate[i] = 3 + m + int((tstate >= 0).sum())
+        dtemp = np.zeros(who.size)
         mine = who == i
         dtemp[mine] = (at_samples - at_samples[0])[position[mine]]
-    return tstate, dtemp
+        out.append(Regressor("thermal", i, dtemp, THERMAL_PRIOR))
+    return out
 
 
 @dataclass(frozen=True)
 class Layout:
-    """The sensors' states in ``x`` and what their measurement rows need."""
+    """The sensors' states in ``x`` and what their measurement rows need.
+
+    ``x = [h, v, b, c_1 .. c_m, regressors .., drift rates ..]``.
+    """
 
     sign: FloatArray  # +1: the sensor measures h + c_i; -1: h - c_i (a rangefinder)
-    thermal: np.ndarray  # each sensor's temperature-coefficient state; -1: none
-    dtemp: FloatArray  # each event's temperature change of its sensor [degC]
-    drift: np.ndarray  # each sensor's drift-rate state; -1: none
+    regressors: tuple[Regressor, ...]
+    drifting: tuple[int, ...] = ()  # the sensors whose offset has a drift rate
 
     @property
     def n(self) -> int:
-        return 3 + self.sign.size + int((self.thermal >= 0).sum() + (self.drift >= 0).sum())
+        return 3 + self.sign.size + len(self.regressors) + len(self.drifting)
+
+    def index(self, j: int) -> int:
+        """The state of regressor ``j``."""
+        return 3 + self.sign.size + j
+
+    def of_sensor(self, i: int) -> list[tuple[int, Regressor]]:
+        """Sensor ``i``'s regressors and their states."""
+        return [(self.index(j), r) for j, r in enumerate(self.regressors) if r.sensor == i]
+
+    def has(self, name: str) -> bool:
+        return any(r.name == name for r in self.regressors)
 
     @property
     def drift_pairs(self) -> np.ndarray:
         """(offset state, its drift-rate state) per drifting sensor, shape (k, 2)."""
-        drifting = np.flatnonzero(self.drift >= 0)
-        return np.column_stack([3 + drifting, self.drift[drifting]])
+        first = 3 + self.sign.size + len(self.regressors)
+        pairs = [(3 + i, first + d) for d, i in enumerate(self.drifting)]
+        return np.array(pairs, dtype=int).reshape(-1, 2)
 
-    def without_thermal(self) -> Layout:
-        """The same without the temperature-coefficient states."""
-        return Layout(self.sign, np.full(self.sign.size, -1), self.dtemp, self.drift)
+    def without(self, name: str) -> Layout:
+        """The same without the regressors called ``name``."""
+        kept = tuple(r for r in self.regressors if r.name != name)
+        return replace(self, regressors=kept)
 
     def with_drift(self, kinds: Sequence[str]) -> Layout:
         """The same with a drift-rate state for each barometer."""
-        drift = np.full(self.sign.size, -1)
-        baros = [i for i, k in enumerate(kinds) if k == "baro"]
-        drift[baros] = self.n + np.arange(len(baros))
-        return Layout(self.sign, self.thermal, self.dtemp, drift)
+        return replace(self, drifting=tuple(i for i, k in enumerate(kinds) if k == "baro"))
 
 
 def transition(dt: float, n: int, use_bias: bool, drifts: np.ndarray) -> FloatArray:
@@ -129,11 +154,11 @@ def process_noise(ev: Events, k: int, dt: float, n: int, drifts: np.ndarray) -> 
 
 def measurement_row(layout: Layout, i: int, k: int) -> FloatArray:
     """H of sensor ``i``'s sample at event ``k``: h plus the sensor's offset (GPS, baro) or
-    minus its ground height (rangefinder), plus its temperature term."""
+    minus its ground height (rangefinder), plus its regressors' terms."""
     hrow = np.zeros(layout.n)
     hrow[0], hrow[3 + i] = 1.0, layout.sign[i]
-    if layout.thermal[i] >= 0:
-        hrow[layout.thermal[i]] = layout.dtemp[k]
+    for state, reg in layout.of_sensor(i):
+        hrow[state] = reg.coef[k]
     return hrow
 
 
@@ -149,17 +174,16 @@ def hold_still(x: FloatArray, p: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 def prior(ev: Events, layout: Layout) -> tuple[FloatArray, FloatArray]:
     """The state and covariance before the first event: ``h`` at the first height guess, every
-    other state at 0; a loose height, velocity and offsets, the priors of the temperature
-    coefficients and drift rates."""
-    m, n = layout.sign.size, layout.n
-    n_thermal = int((layout.thermal >= 0).sum())
-    x = np.zeros(n)
+    other state at 0; a loose height, velocity and offsets, the regressors' priors and the drift
+    rates'."""
+    m = layout.sign.size
+    x = np.zeros(layout.n)
     x[0] = ev.h0
     # without the accelerometer the bias is inert: a tiny fixed variance keeps P invertible
     p = np.diag(
         [10.0**2, 3.0**2, 0.1**2 if ev.use_bias else 1e-9]
         + [1.0**2] * m
-        + [THERMAL_PRIOR**2] * n_thermal
-        + [DRIFT_PRIOR**2] * (n - 3 - m - n_thermal)
+        + [r.prior**2 for r in layout.regressors]
+        + [DRIFT_PRIOR**2] * len(layout.drifting)
     )
     return x, p

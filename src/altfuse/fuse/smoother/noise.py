@@ -207,16 +207,16 @@ def measurement_noise(
 def em_scale(ev: Events, layout: Layout, noise: Noise, out: dict[str, np.ndarray]) -> None:
     """EM, M-step: each sensor's noise scale from the smoothed residuals (in place)."""
     xs, ps = out["x"], out["p"]
-    tstate, sign, dtemp = layout.thermal, layout.sign, layout.dtemp
+    sign = layout.sign
     for i in range(sign.size):
         mine = (ev.who == i) & out["accepted"]
         if noise.fixed[i] or not mine.any():
             continue
-        # the measurement model's rows at these events: coefficients on (h, c_i, k_i)
-        cols = [0, 3 + i] + ([int(tstate[i])] if tstate[i] >= 0 else [])
+        # the measurement model's rows at these events: coefficients on (h, c_i, regressors)
+        regs = layout.of_sensor(i)
+        cols = [0, 3 + i] + [state for state, _ in regs]
         coef = np.column_stack(
-            [np.ones(mine.sum()), np.full(mine.sum(), sign[i])]
-            + ([dtemp[mine]] if tstate[i] >= 0 else [])
+            [np.ones(mine.sum()), np.full(mine.sum(), sign[i])] + [r.coef[mine] for _, r in regs]
         )
         resid = ev.z[mine] - np.einsum("ka,ka->k", coef, xs[mine][:, cols])
         var_h = np.einsum("ka,kab,kb->k", coef, ps[mine][:, cols][:, :, cols], coef)
