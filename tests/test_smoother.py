@@ -19,6 +19,7 @@ from altfuse.fuse.smoother import SmootherParams, fuse_smoother
 from altfuse.fuse.smoother.evidence import DRIFT_GAIN
 from altfuse.fuse.smoother.noise import (
     Q_AGREEMENT_MIN_SHARE,
+    accel_spikes,
     measurement_sigma,
     terrain_noise,
     wander_bound,
@@ -174,6 +175,40 @@ def test_a_step_in_every_sensor_without_acceleration_is_followed() -> None:
     after = t >= 30.0 + LOCKOUT_S + 1.0
     assert np.max(np.abs(res.fused[after] - 15.0)) < 0.1
     assert res.params["rejected_gps"] + res.params["rejected_baro"] < 2 * 10 * (LOCKOUT_S + 1)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_an_accelerometer_impulse_is_recovered_from_within_2_s(sign: float) -> None:
+    """Issue 15: one 25 Hz IMU sample worth +-20 m/s (an impact, a clipped sample), GPS and
+    barometer agreeing: the height stays with them (it ran 40 m away for the 2 s of the
+    lockout before)."""
+    rng = np.random.default_rng(3)
+    dt = 0.04
+    t = np.arange(0.0, 80.0, dt)
+    h = 10 + 5 * np.sin(t / 6)
+    a = -5 / 36 * np.sin(t / 6) + rng.normal(0.0, 0.05, t.size)
+    a[int(40 / dt)] += sign * 20.0 / dt
+    z = np.column_stack([h + rng.normal(0, 0.3, t.size), h + rng.normal(0, 0.1, t.size)])
+    z[np.arange(t.size) % 5 != 0, 0] = np.nan  # the GPS at 5 Hz
+    inputs = FusionInput.from_heights(z, dt, kinds=("gps", "baro"), accel_up=a)
+    res = fuse_smoother(inputs, SmootherParams())
+    error = np.abs(res.fused - h)
+    assert error[(t >= 40.0) & (t < 42.0)].max() < 0.2
+    assert error[t >= 42.0].max() < 0.15
+    assert res.params["rejected_gps"] + res.params["rejected_baro"] < 10
+
+
+def test_accelerometer_spikes_add_their_excess_as_unknown() -> None:
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 100.0, 0.02)
+    a = np.sin(t) + rng.normal(0.0, 0.1, t.size)
+    # normal noise adds (almost) nothing: under 1 cm/s of velocity over the 100 s
+    assert np.sqrt(np.sum(accel_spikes(t, a) * 0.02)) < 0.01
+    a[2000] += 50.0
+    added = accel_spikes(t, a)
+    # the sample's excess beyond 5 sigma, as velocity: about (50 - 0.5) m/s^2 over 0.02 s
+    assert np.sqrt(added[2000] * 0.02) == pytest.approx(49.5 * 0.02, rel=0.05)
+    assert np.sqrt(np.sum(np.delete(added, 2000) * 0.02)) < 0.01
 
 
 def test_the_agreement_of_two_sensors_bounds_their_wander_from_above() -> None:

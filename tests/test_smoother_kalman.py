@@ -39,7 +39,8 @@ def toy(seed: int, accel: bool) -> tuple[Events, Layout, np.ndarray]:
     a = -3 / 16 * np.sin(t / 4) + rng.normal(0, 0.1, count) if accel else np.zeros(count)
     q_state = np.tile([0.01, 1e-4], (count, 1))
     still = np.zeros(count, dtype=bool)
-    events = Events(t, who, z, a, q_state, still, 0.05, True, np.inf, float(z[who >= 0][0]))
+    spikes = np.zeros(count)
+    events = Events(t, who, z, a, q_state, still, 0.05, spikes, True, np.inf, float(z[who >= 0][0]))
     scale = Regressor("scale", 1, np.where(who == 1, truth, 0.0), 0.02)
     layout = Layout(np.ones(M), (scale,), drifting=(1,))
     return events, layout, r

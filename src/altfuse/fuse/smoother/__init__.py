@@ -46,7 +46,10 @@ From the log itself:
   each followed by the M-step ``s_i = mean((residual^2 + H P H^T) / sigma^2)`` over the sensor's
   accepted samples);
 - the acceleration noise, from the accelerometer's own sample-to-sample spread
-  (:func:`accel_psd`);
+  (:func:`.noise.accel_psd`), raised over each spike (an impact, a clipped sample: a
+  departure from its neighbours beyond five times the flight's spread, :func:`.noise.accel_spikes`)
+  by the spike's excess, so that one sample worth 20 m/s no longer locks every sensor out for
+  the 2 s of ``LOCKOUT_S`` (40 m away; now within 0.1 m);
 - each barometer's temperature coefficient (a state, above);
 - the terrain's roughness under a rangefinder, per metre flown (:func:`terrain_noise`, with the
   horizontal speed from ``GPS.Spd``): over flat ground, or hovering, the rangefinder is an
@@ -119,12 +122,13 @@ from altfuse.fuse.smoother.noise import (
     Q_OFFSET,
     Noise,
     accel_psd,
+    accel_spikes,
     em_scale,
     measurement_noise,
     state_noise,
 )
 from altfuse.fuse.smoother.passes import run
-from altfuse.model import FloatArray
+from altfuse.model import FloatArray, Samples
 from altfuse.params import InvalidParameter, Params, param
 
 #: EM iterations (each a forward and a backward pass) after the first pass.
@@ -188,15 +192,19 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     if inputs.on_ground_s is not None:
         lo, hi = inputs.on_ground_s
         still = (who == -1) & (times >= lo) & (times <= hi)
-    a = np.zeros(times.size)
+    a, q_spike = np.zeros(times.size), np.zeros(times.size)
     if use_imu and accel is not None:
         a = np.nan_to_num(interval_mean(accel, times))
+        spikes = Samples(accel.t, accel_spikes(*accel))
+        q_spike = np.nan_to_num(interval_mean(spikes, times))
     first = [s.value[0] for s in samples if s.value.size]
     h0 = float(np.median(first)) if first else 0.0
     sign = np.array([-1.0 if k == "rangefinder" else 1.0 for k in kinds])
     layout = Layout(sign, tuple(thermal_regressors(inputs.temperatures, samples, who, position)))
     q_events, terrain = state_noise(inputs, times, params.offset_noise_m2_s)
-    ev = Events(times, who, values, a, q_events, still, q_accel, use_imu, params.gate_sigma, h0)
+    ev = Events(
+        times, who, values, a, q_events, still, q_accel, q_spike, use_imu, params.gate_sigma, h0
+    )
     physical = ev
     if params.offset_noise_m2_s:
         physical = replace(ev, q_state=state_noise(inputs, times, {})[0])

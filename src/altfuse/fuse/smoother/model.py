@@ -118,7 +118,8 @@ class Events:
     """What the forward pass steps through, one entry per event (a sample or a clock tick).
 
     ``who``: the sensor of a sample, -1 for a tick; ``z``: the sample's value; ``a``: the mean
-    vertical acceleration over the interval ending at the event; ``q_state`` (events, m): the
+    vertical acceleration over the interval ending at the event, ``q_spike`` the acceleration
+    noise density its spikes add there [m^2/s^3]; ``q_state`` (events, m): the
     sensor states' random-walk densities over that interval; ``still``: the events at which the
     vehicle is known to stand at the take-off point; ``h0``: the first height guess.
     """
@@ -130,6 +131,7 @@ class Events:
     q_state: FloatArray
     still: np.ndarray
     q_accel: float
+    q_spike: FloatArray
     use_bias: bool
     gate: float
     h0: float
@@ -140,7 +142,7 @@ def process_noise(ev: Events, k: int, dt: float, n: int, drifts: np.ndarray) -> 
     and the sensor states' random walks, and each drifting offset's integrated random walk."""
     m = ev.q_state.shape[1]
     q = np.zeros((n, n))
-    q_accel = ev.q_accel
+    q_accel = ev.q_accel + ev.q_spike[k]
     q[0, 0], q[0, 1], q[1, 1] = q_accel * dt**3 / 3, q_accel * dt**2 / 2, q_accel * dt
     q[1, 0] = q[0, 1]
     q[2, 2] = Q_BIAS * dt if ev.use_bias else 0.0

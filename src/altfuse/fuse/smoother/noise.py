@@ -36,6 +36,12 @@ MAX_SPEED_M_S = 100.0
 #: default random walks it may leave (a floor: two simulated sensors can agree exactly).
 AGREEMENT_LAGS_S = (2.0, 5.0, 10.0, 20.0, 40.0)
 Q_AGREEMENT_MIN_SHARE = 1e-2
+#: An accelerometer sample departing from its neighbours' median (over SPIKE_WINDOW_S, at
+#: least SPIKE_MIN_SAMPLES) by more than SPIKE_SIGMAS of the flight's such departures is a spike
+#: (an impact, a clipped or glitched sample); the excess is taken as unknown.
+SPIKE_WINDOW_S = 0.1
+SPIKE_MIN_SAMPLES = 5
+SPIKE_SIGMAS = 5.0
 #: Window [s] of the local measurement-noise estimate.
 NOISE_WINDOW_S = 5.0
 _MIN_SIGMA_M = 0.01
@@ -56,6 +62,28 @@ def accel_psd(t: FloatArray, a: FloatArray) -> float:
         return Q_ACCEL
     sigma = mad_sigma(np.diff(a)) / math.sqrt(2.0)
     return max(sigma**2 * float(np.median(np.diff(t))), Q_ACCEL_MIN)
+
+
+def accel_spikes(t: FloatArray, a: FloatArray) -> FloatArray:
+    """The white-acceleration density [m^2/s^3] each accelerometer sample adds to the process
+    noise: ``max(|e| - k s, 0)^2 dt`` for its departure ``e`` from the median of its neighbours
+    (``SPIKE_WINDOW_S``), ``s`` the flight's spread of those departures (from the MAD), ``k``
+    ``SPIKE_SIGMAS`` and ``dt`` its sampling interval; 0 for the samples that are no spike.
+
+    Logged IMU samples are point samples of a sensor read at 1 kHz or more: an impact, a bounce
+    or a clipped sample integrates to metres per second of velocity in one sample (20 m/s seen),
+    which no sensor confirms. Its excess over the normal spread is counted as unknown velocity
+    change in that interval, so the sensors' samples that follow are fused, not gated out
+    (ArduPilot's EKF3 raises its acceleration noise when the IMU clips).
+    """
+    if a.size < 2 * SPIKE_MIN_SAMPLES:
+        return np.zeros(a.size)
+    step = float(np.median(np.diff(t)))
+    width = max(SPIKE_MIN_SAMPLES, round(SPIKE_WINDOW_S / step) if step > 0 else 0) | 1
+    e = a - pd.Series(a).rolling(width, center=True, min_periods=1).median().to_numpy()
+    excess = np.maximum(np.abs(e) - SPIKE_SIGMAS * mad_sigma(e), 0.0)
+    dt = np.diff(t, append=t[-1] + step)
+    return np.asarray(excess**2 * np.maximum(dt, 0.0))
 
 
 def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) -> FloatArray:
