@@ -19,6 +19,7 @@ from altfuse.fuse.smoother import SmootherParams, fuse_smoother
 from altfuse.fuse.smoother.evidence import DRIFT_GAIN
 from altfuse.fuse.smoother.noise import (
     Q_AGREEMENT_MIN_SHARE,
+    accel_refused,
     accel_spikes,
     measurement_sigma,
     terrain_noise,
@@ -196,6 +197,33 @@ def test_an_accelerometer_impulse_is_recovered_from_within_2_s(sign: float) -> N
     assert error[(t >= 40.0) & (t < 42.0)].max() < 0.2
     assert error[t >= 42.0].max() < 0.15
     assert res.params["rejected_gps"] + res.params["rejected_baro"] < 10
+
+
+def _wrong_accelerometer(kinds: tuple[str, str]) -> tuple[FusionInput, np.ndarray, np.ndarray]:
+    """Two sensors agreeing with the truth and an accelerometer 8 m/s^2 off for 3 s (an attitude
+    error that rotates gravity into the vertical): the inputs, the truth, the clock."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 120.0, 0.1)
+    h = 50 + 20 * np.sin(t / 10)
+    a = -0.2 * np.sin(t / 10) + rng.normal(0.0, 0.05, t.size)
+    a[(t >= 60) & (t < 63)] += 8.0
+    z = np.column_stack([h + rng.normal(0, 0.05, t.size), h + rng.normal(0, 0.2, t.size)])
+    return FusionInput.from_heights(z, 0.1, kinds=kinds, accel_up=a), h, t
+
+
+def test_the_sensors_refuse_an_accelerometer_they_all_contradict() -> None:
+    """Issue 15, item 2: where a GPS and a barometer agree against the accelerometer for seconds,
+    its noise is raised there, and only there; two barometers are one witness."""
+    inputs, h, t = _wrong_accelerometer(("gps", "baro"))
+    assert inputs.accel is not None
+    refused = accel_refused(inputs, inputs.accel.on_clock)
+    assert refused[(t >= 60.5) & (t < 62.5)].min() > 1.0  # m^2/s^3: metres per second in 1 s
+    assert not refused[(t < 58) | (t > 65)].any()
+    res = fuse_smoother(inputs, SmootherParams())
+    assert np.max(np.abs(res.fused - h)) < 0.3  # 40 m away before
+    one_air, _, _ = _wrong_accelerometer(("baro", "baro"))
+    assert one_air.accel is not None
+    assert not accel_refused(one_air, one_air.accel.on_clock).any()
 
 
 def test_accelerometer_spikes_add_their_excess_as_unknown() -> None:

@@ -49,7 +49,10 @@ From the log itself:
   (:func:`.noise.accel_psd`), raised over each spike (an impact, a clipped sample: a
   departure from its neighbours beyond five times the flight's spread, :func:`.noise.accel_spikes`)
   by the spike's excess, so that one sample worth 20 m/s no longer locks every sensor out for
-  the 2 s of ``LOCKOUT_S`` (40 m away; now within 0.1 m);
+  the 2 s of ``LOCKOUT_S`` (40 m away; now within 0.1 m); and raised over each second in
+  which a GPS and a barometer agree against it (:func:`.noise.accel_refused`: a plane's
+  attitude error, 6-30 m/s^2 in the vertical at large bank angles, took the height 90 m away
+  between lockouts; now within 0.9 m);
 - each barometer's temperature coefficient (a state, above);
 - the terrain's roughness under a rangefinder, per metre flown (:func:`terrain_noise`, with the
   horizontal speed from ``GPS.Spd``): over flat ground, or hovering, the rangefinder is an
@@ -122,6 +125,7 @@ from altfuse.fuse.smoother.noise import (
     Q_OFFSET,
     Noise,
     accel_psd,
+    accel_refused,
     accel_spikes,
     em_scale,
     measurement_noise,
@@ -192,11 +196,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     if inputs.on_ground_s is not None:
         lo, hi = inputs.on_ground_s
         still = (who == -1) & (times >= lo) & (times <= hi)
-    a, q_spike = np.zeros(times.size), np.zeros(times.size)
-    if use_imu and accel is not None:
-        a = np.nan_to_num(interval_mean(accel, times))
-        spikes = Samples(accel.t, accel_spikes(*accel))
-        q_spike = np.nan_to_num(interval_mean(spikes, times))
+    a, q_spike = _accelerometer(inputs, times)
     first = [s.value[0] for s in samples if s.value.size]
     h0 = float(np.median(first)) if first else 0.0
     sign = np.array([-1.0 if k == "rangefinder" else 1.0 for k in kinds])
@@ -258,6 +258,19 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             },
         },
     )
+
+
+def _accelerometer(inputs: FusionInput, times: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The mean vertical acceleration over each event interval (0 without the IMU), and the
+    acceleration noise density [m^2/s^3] its spikes and the sensors' refusals add there."""
+    vertical = inputs.accel
+    if vertical is None or vertical.samples.t.size < 2:
+        return np.zeros(times.size), np.zeros(times.size)
+    accel = vertical.samples
+    spikes = Samples(accel.t, accel_spikes(*accel))
+    refused = Samples(inputs.t, accel_refused(inputs, np.nan_to_num(vertical.on_clock)))
+    added = interval_mean(spikes, times) + interval_mean(refused, times)
+    return np.nan_to_num(interval_mean(accel, times)), np.nan_to_num(added)
 
 
 #: How each regressor is recorded: the key's pattern and unit.

@@ -42,6 +42,14 @@ Q_AGREEMENT_MIN_SHARE = 1e-2
 SPIKE_WINDOW_S = 0.1
 SPIKE_MIN_SAMPLES = 5
 SPIKE_SIGMAS = 5.0
+#: The accelerometer against the sensors: each sensor's velocity is its heights' slope over
+#: CHECK_SLOPE_S; over each CHECK_SPAN_S both velocities' changes must agree within
+#: CHECK_SIGMAS of the slopes' errors plus CHECK_FLOOR_M_S (a sensor's lag, 0.1-0.25 s, turns a
+#: change of acceleration into a few tenths of a metre per second).
+CHECK_SLOPE_S = 2.0
+CHECK_SPAN_S = 1.0
+CHECK_SIGMAS = 5.0
+CHECK_FLOOR_M_S = 0.5
 #: Window [s] of the local measurement-noise estimate.
 NOISE_WINDOW_S = 5.0
 _MIN_SIGMA_M = 0.01
@@ -84,6 +92,67 @@ def accel_spikes(t: FloatArray, a: FloatArray) -> FloatArray:
     excess = np.maximum(np.abs(e) - SPIKE_SIGMAS * mad_sigma(e), 0.0)
     dt = np.diff(t, append=t[-1] + step)
     return np.asarray(excess**2 * np.maximum(dt, 0.0))
+
+
+def _slope(t: FloatArray, z: FloatArray, width: int) -> tuple[FloatArray, FloatArray]:
+    """The least-squares slope of ``z`` over a centred window of ``width`` ticks at each tick,
+    and the window's ``sum (t - mean t)^2`` (the slope's error is ``sigma / sqrt`` of it); NaN
+    where fewer than 4 samples are valid."""
+    ok = np.isfinite(z)
+    tt, zz = np.where(ok, t - t[0], 0.0), np.where(ok, z, 0.0)
+
+    def rolling(v: FloatArray) -> FloatArray:
+        return np.asarray(pd.Series(v).rolling(width, center=True, min_periods=1).sum())
+
+    n, st, sz, stt, stz = (rolling(v) for v in (ok.astype(float), tt, zz, tt * tt, tt * zz))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sxx = stt - st * st / n
+        slope = (stz - st * sz / n) / sxx
+    bad = (n < 4) | ~(sxx > 0)
+    return np.where(bad, np.nan, slope), np.where(bad, np.nan, sxx)
+
+
+def accel_refused(inputs: FusionInput, a: FloatArray) -> FloatArray:
+    """The acceleration noise density [m^2/s^3] at each tick where every GPS and barometer
+    refuses the accelerometer ``a`` (on the clock); 0 elsewhere.
+
+    Over each span of ``CHECK_SPAN_S`` the change of the slope (over ``CHECK_SLOPE_S``) of each
+    sensor's heights less the accelerometer's double integral, ``r``, is 0 within the slopes'
+    errors; where it is not for any sensor, on one side for all and with two kinds of sensor at
+    least (a GPS and a barometer do not share their errors; two barometers read one air), the
+    accelerometer, not the sensors, is wrong there: the span gets the density ``r^2 / T``, ``r``
+    the sensors' least. A plane's log whose vertical acceleration errs by 6-30 m/s^2 at large
+    bank angles (gravity rotated into the vertical by an attitude error) integrated to 90 m away
+    between the gate's lockouts.
+    """
+    t, z, dt = inputs.t, inputs.z, inputs.dt_s
+    steady = [i for i, k in enumerate(inputs.kinds) if k != "rangefinder"]
+    extra = np.zeros(t.size)
+    span = max(1, round(CHECK_SPAN_S / dt))
+    if len({inputs.kinds[i] for i in steady}) < 2 or t.size <= span:
+        return extra
+    width = max(5, round(CHECK_SLOPE_S / dt))
+    # the height the accelerometer alone gives: its slope goes through the same window as the
+    # sensors' (a change of acceleration inside it must not count)
+    step = np.diff(t, prepend=t[0])
+    h_accel = np.cumsum(np.cumsum(a * step) * step)
+    changes = []
+    for i in steady:
+        valid = np.isfinite(z[:, i])
+        if valid.sum() < 10:
+            return extra
+        sigma = white_noise_sigma(z[valid, i])
+        d, sxx = _slope(t, z[:, i] - h_accel, width)
+        r = d[span:] - d[:-span]
+        bound = CHECK_SIGMAS * sigma * np.sqrt(1 / sxx[span:] + 1 / sxx[:-span]) + CHECK_FLOOR_M_S
+        changes.append(np.where(np.abs(r) > bound, r, np.nan))
+    r = np.array(changes)
+    agreed = np.isfinite(r).all(axis=0) & ((r > 0).all(axis=0) | (r < 0).all(axis=0))
+    least = np.where(agreed, np.nanmin(np.abs(np.nan_to_num(r, nan=np.inf)), axis=0), 0.0)
+    density = least**2 / (span * dt)
+    for j in range(span + 1):  # every tick of a refused span
+        extra[j : j + density.size] = np.maximum(extra[j : j + density.size], density)
+    return extra
 
 
 def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) -> FloatArray:
