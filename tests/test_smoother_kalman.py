@@ -53,7 +53,8 @@ def filterpy_passes(
     n, drifts = layout.n, layout.drift_pairs
     dts = np.diff(ev.t, prepend=ev.t[0])
     fs = [transition(dt, n, ev.use_bias, drifts) for dt in dts]
-    qs = [process_noise(ev, k, dt, n, drifts) for k, dt in enumerate(dts)]
+    qa = ev.q_accel + ev.q_spike
+    qs = [process_noise(dt, qa[k], ev.q_state[k], n, True, drifts) for k, dt in enumerate(dts)]
     us = [np.array([[0.5 * ev.a[k] * dt * dt], [ev.a[k] * dt]]) for k, dt in enumerate(dts)]
     bs = [np.vstack([np.eye(2), np.zeros((n - 2, 2))])] * ev.t.size
     hs = []

@@ -136,7 +136,7 @@ from altfuse.model import FloatArray, Samples
 from altfuse.params import InvalidParameter, Params, param
 
 #: EM iterations (each a forward and a backward pass) after the first pass.
-EM_PASSES = 4
+EM_PASSES = 3
 
 
 @dataclass(frozen=True, kw_only=True)

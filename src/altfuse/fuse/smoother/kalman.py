@@ -12,33 +12,37 @@ from __future__ import annotations
 
 import numpy as np
 
+from altfuse.fuse.smoother.compiled import compiled, dot, matmul, matvec, solve_spd
 from altfuse.model import FloatArray
 
 
+@compiled
 def predict(
     x: FloatArray, p: FloatArray, f: FloatArray, q: FloatArray, u: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """The prior at the next step: the state and its covariance carried through ``F``."""
     # x = F x + B u
-    x = f @ x + u
+    x = matvec(f, x) + u
     # P = F P F' + Q
-    p = f @ p @ f.T + q
+    p = matmul(matmul(f, p), f.T) + q
     return x, p
 
 
+@compiled
 def innovation(
     x: FloatArray, p: FloatArray, z: float, h: FloatArray, r: float
 ) -> tuple[float, float, FloatArray]:
     """A scalar measurement's innovation ``y``, its variance ``S`` and ``P H'``."""
     # y = z - H x
-    y = float(z - h @ x)
+    y = z - dot(h, x)
     # P H'
-    ph = p @ h
+    ph = matvec(p, h)
     # S = H P H' + R
-    s = float(h @ ph + r)
+    s = dot(h, ph) + r
     return y, s, ph
 
 
+@compiled
 def update(
     x: FloatArray, p: FloatArray, y: float, s: float, ph: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -53,6 +57,7 @@ def update(
     return x, p, k
 
 
+@compiled
 def rts_step(
     filtered: tuple[FloatArray, FloatArray],
     predicted_next: tuple[FloatArray, FloatArray],
@@ -61,9 +66,11 @@ def rts_step(
 ) -> tuple[FloatArray, FloatArray]:
     """One backward step: the smoothed ``(x, P)`` at ``k`` from the filtered one at ``k``, the
     prior at ``k + 1`` (``F`` between them) and the smoothed one at ``k + 1``."""
-    (xf, pf), (xp, pp), (xs, ps) = filtered, predicted_next, smoothed_next
-    # C = P_f F' P_p(k+1)^-1   (solved, not inverted: P_p C' = F P_f)
-    c = np.linalg.solve(pp.T, (pf @ f.T).T).T
+    xf, pf = filtered
+    xp, pp = predicted_next
+    xs, ps = smoothed_next
+    # C = P_f F' P_p(k+1)^-1   (solved, not inverted: P_p C' = F P_f, P_p symmetric)
+    c = solve_spd(pp, matmul(f, pf)).T
     # x_s = x_f + C (x_s(k+1) - x_p(k+1))
     # P_s = P_f + C (P_s(k+1) - P_p(k+1)) C'
-    return xf + c @ (xs - xp), pf + c @ (ps - pp) @ c.T
+    return xf + matvec(c, xs - xp), pf + matmul(matmul(c, ps - pp), c.T)

@@ -10,6 +10,7 @@ from typing import Literal
 
 import numpy as np
 
+from altfuse.fuse.smoother.compiled import compiled
 from altfuse.model import FloatArray, Samples
 
 #: Accelerometer bias random walk [m^2/s^5].
@@ -101,6 +102,7 @@ class Layout:
         return replace(self, drifting=tuple(i for i, k in enumerate(kinds) if k == "baro"))
 
 
+@compiled
 def transition(dt: float, n: int, use_bias: bool, drifts: np.ndarray) -> FloatArray:
     """F over ``dt``: h += v dt - b dt^2/2, v += -b dt, c_i += r_i dt for a sensor with a drift
     rate ``r_i`` (``drifts``: (offset, rate) state pairs); the rest random walks (identity)."""
@@ -108,8 +110,8 @@ def transition(dt: float, n: int, use_bias: bool, drifts: np.ndarray) -> FloatAr
     f[0, 1] = dt
     if use_bias:
         f[0, 2], f[1, 2] = -0.5 * dt * dt, -dt
-    if drifts.size:
-        f[drifts[:, 0], drifts[:, 1]] = dt
+    for j in range(drifts.shape[0]):
+        f[drifts[j, 0], drifts[j, 1]] = dt
     return f
 
 
@@ -137,33 +139,44 @@ class Events:
     h0: float
 
 
-def process_noise(ev: Events, k: int, dt: float, n: int, drifts: np.ndarray) -> FloatArray:
-    """Q over the interval ``dt`` ending at event ``k``: white acceleration on (h, v), the bias's
-    and the sensor states' random walks, and each drifting offset's integrated random walk."""
-    m = ev.q_state.shape[1]
+@compiled
+def process_noise(
+    dt: float, q_accel: float, q_state: FloatArray, n: int, use_bias: bool, drifts: np.ndarray
+) -> FloatArray:
+    """Q over an interval ``dt``: white acceleration of density ``q_accel`` on (h, v), the bias's
+    and the sensor states' random walks (``q_state``, one density per sensor), and each drifting
+    offset's integrated random walk."""
     q = np.zeros((n, n))
-    q_accel = ev.q_accel + ev.q_spike[k]
+    # white acceleration: [[dt^3/3, dt^2/2], [dt^2/2, dt]] q_a on (h, v)
     q[0, 0], q[0, 1], q[1, 1] = q_accel * dt**3 / 3, q_accel * dt**2 / 2, q_accel * dt
     q[1, 0] = q[0, 1]
-    q[2, 2] = Q_BIAS * dt if ev.use_bias else 0.0
-    q[3 : 3 + m, 3 : 3 + m] = np.diag(ev.q_state[k] * dt)
-    for c, rate in drifts:  # a drifting offset: an integrated random walk
+    q[2, 2] = Q_BIAS * dt if use_bias else 0.0
+    for i in range(q_state.size):
+        q[3 + i, 3 + i] = q_state[i] * dt
+    for j in range(drifts.shape[0]):  # a drifting offset: an integrated random walk
+        c, rate = drifts[j, 0], drifts[j, 1]
         q[c, c] += Q_DRIFT * dt**3 / 3
-        q[c, rate] = q[rate, c] = Q_DRIFT * dt**2 / 2
+        q[c, rate] = Q_DRIFT * dt**2 / 2
+        q[rate, c] = q[c, rate]
         q[rate, rate] = Q_DRIFT * dt
     return q
 
 
-def measurement_row(layout: Layout, i: int, k: int) -> FloatArray:
-    """H of sensor ``i``'s sample at event ``k``: h plus the sensor's offset (GPS, baro) or
-    minus its ground height (rangefinder), plus its regressors' terms."""
-    hrow = np.zeros(layout.n)
-    hrow[0], hrow[3 + i] = 1.0, layout.sign[i]
-    for state, reg in layout.of_sensor(i):
-        hrow[state] = reg.coef[k]
-    return hrow
+def measurement_matrix(layout: Layout, who: np.ndarray) -> FloatArray:
+    """H of every event (events, n): for a sample of sensor ``i``, h plus the sensor's offset
+    (GPS, baro) or minus its ground height (rangefinder), plus its regressors' terms; 0 for a
+    tick."""
+    h = np.zeros((who.size, layout.n))
+    sample = who >= 0
+    h[sample, 0] = 1.0
+    h[sample, 3 + who[sample]] = layout.sign[who[sample]]
+    for j, reg in enumerate(layout.regressors):
+        mine = who == reg.sensor
+        h[mine, layout.index(j)] = reg.coef[mine]
+    return h
 
 
+@compiled
 def hold_still(x: FloatArray, p: FloatArray) -> tuple[FloatArray, FloatArray]:
     """On the ground before take-off: h = 0 and v = 0 (the datum's definition)."""
     for j in (0, 1):

@@ -1,5 +1,6 @@
 """The smoother's passes over the events: the forward Kalman filter, with its innovation gate and
-lockout release, and the Rauch-Tung-Striebel backward pass (steps from :mod:`.kalman`)."""
+lockout release, and the Rauch-Tung-Striebel backward pass (steps from :mod:`.kalman`), each one
+compiled loop over the events (:mod:`.compiled`)."""
 
 from __future__ import annotations
 
@@ -7,12 +8,13 @@ import math
 
 import numpy as np
 
+from altfuse.fuse.smoother.compiled import compiled, matmul
 from altfuse.fuse.smoother.kalman import innovation, predict, rts_step, update
 from altfuse.fuse.smoother.model import (
     Events,
     Layout,
     hold_still,
-    measurement_row,
+    measurement_matrix,
     prior,
     process_noise,
     transition,
@@ -30,62 +32,114 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
     innovation's density; NaN elsewhere): the evidence by which :func:`evidence_gain` compares two
     models.
     """
-    drifts, n = layout.drift_pairs, layout.n
-    count = ev.t.size
-    loglik = np.full(count, np.nan)
+    x0, p0 = prior(ev, layout)
+    drifts = layout.drift_pairs.astype(np.int64)
+    h = measurement_matrix(layout, ev.who)
+    q_accel = ev.q_accel + np.asarray(ev.q_spike, dtype=np.float64)
+    dynamics = (
+        ev.a, q_accel, np.ascontiguousarray(ev.q_state, dtype=np.float64), drifts, ev.use_bias
+    )  # fmt: skip
+    xp, xf, pf, released, gain_h, accepted, loglik = _forward(
+        (ev.t, ev.who.astype(np.int64), ev.z, np.asarray(r, dtype=np.float64), h),
+        dynamics,
+        ev.still.astype(np.bool_),
+        ev.gate,
+        (x0, p0),
+    )
+    if smooth:
+        _backward(ev.t, (xp, xf, pf, released), dynamics)
+    return {"x": xf, "p": pf, "gain_h": gain_h, "accepted": accepted, "loglik": loglik}
+
+
+@compiled
+def _forward(
+    measured: tuple[FloatArray, np.ndarray, FloatArray, FloatArray, FloatArray],
+    dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool],
+    still: np.ndarray,
+    gate: float,
+    start: tuple[FloatArray, FloatArray],
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray, FloatArray]:
+    """The forward filter: each event's prior state, posterior state and covariance, what the
+    lockout release added to the prior's (h, v) variances there, each sample's gain on h,
+    whether it passed the gate, and its log-likelihood. The priors' covariances are not kept
+    (a flight's worth is hundreds of megabytes): :func:`_backward` makes them again.
+
+    ``measured``: the events' times, series (-1 a tick), values, variances and rows of H;
+    ``dynamics``: the mean acceleration over the interval ending at each event, the white
+    acceleration density there, the sensor states' densities, the drifting offsets' (offset,
+    rate) state pairs and whether the bias is a state; ``start``: the prior.
+    """
+    t, who, z, r, h = measured
+    a, q_accel, q_state, drifts, use_bias = dynamics
+    x, p = start
+    count, n = h.shape
     xp = np.zeros((count, n))
-    pp = np.zeros((count, n, n))
+    released = np.zeros((count, 2))
     xf = np.zeros((count, n))
     pf = np.zeros((count, n, n))
     gain_h = np.zeros(count)
-    accepted = np.zeros(count, dtype=bool)
-    x, p = prior(ev, layout)
-    previous = last_accepted = ev.t[0]
+    accepted = np.zeros(count, dtype=np.bool_)
+    loglik = np.full(count, np.nan)
+    u = np.zeros(n)
+    y = s = 0.0
+    ph = np.zeros(n)
+    previous = last_accepted = t[0]
     for k in range(count):
-        dt = ev.t[k] - previous
-        previous = ev.t[k]
+        dt = t[k] - previous
+        previous = t[k]
         if dt > 0:
             # the accelerometer as the control input: B u = [a dt^2 / 2, a dt, 0, ...]
-            u = np.zeros(n)
-            u[0], u[1] = 0.5 * ev.a[k] * dt * dt, ev.a[k] * dt
-            f = transition(dt, n, ev.use_bias, drifts)
-            x, p = predict(x, p, f, process_noise(ev, k, dt, n, drifts), u)
-        i = ev.who[k]
+            u[0], u[1] = 0.5 * a[k] * dt * dt, a[k] * dt
+            f = transition(dt, n, use_bias, drifts)
+            x, p = predict(
+                x, p, f, process_noise(dt, q_accel[k], q_state[k], n, use_bias, drifts), u
+            )
+        i = who[k]
         if i >= 0:
-            hrow = measurement_row(layout, i, k)
-            y, s, ph = innovation(x, p, ev.z[k], hrow, r[k])
-            if ev.t[k] - last_accepted > LOCKOUT_S and y * y > ev.gate * ev.gate * s:
+            y, s, ph = innovation(x, p, z[k], h[k], r[k])
+            if t[k] - last_accepted > LOCKOUT_S and y * y > gate * gate * s:
                 # no sample of any sensor passed the gate for LOCKOUT_S: the estimate, not
                 # every sensor, has gone astray (ArduPilot's EKF3 resets its height after
                 # 5 s); its height and velocity become as uncertain as this sample says
                 p = p.copy()
-                p[0, 0] += y * y
-                p[1, 1] += (y / LOCKOUT_S) ** 2
-                y, s, ph = innovation(x, p, ev.z[k], hrow, r[k])
-        xp[k], pp[k] = x, p
+                released[k] = y * y, (y / LOCKOUT_S) ** 2
+                p[0, 0] += released[k, 0]
+                p[1, 1] += released[k, 1]
+                y, s, ph = innovation(x, p, z[k], h[k], r[k])
+        xp[k] = x
         # the innovation gate: |y| <= gate sqrt(S)
-        if i >= 0 and y * y <= ev.gate * ev.gate * s:
+        if i >= 0 and y * y <= gate * gate * s:
             x, p, kg = update(x, p, y, s, ph)
             gain_h[k] = abs(kg[0])
             accepted[k] = True
-            last_accepted = ev.t[k]
+            last_accepted = t[k]
             # log N(y; 0, S)
             loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
-        if ev.still[k]:
+        if still[k]:
             x, p = hold_still(x, p)
         xf[k], pf[k] = x, p
-    if smooth:
-        xf, pf = rts(ev, layout, (xp, pp, xf, pf))
-    return {"x": xf, "p": pf, "gain_h": gain_h, "accepted": accepted, "loglik": loglik}
+    return xp, xf, pf, released, gain_h, accepted, loglik
 
 
-def rts(
-    ev: Events, layout: Layout, filtered: tuple[FloatArray, FloatArray, FloatArray, FloatArray]
-) -> tuple[FloatArray, FloatArray]:
-    """The Rauch-Tung-Striebel pass (:func:`.kalman.rts_step`) back over the filtered events."""
-    xp, pp, xf, pf = filtered
-    xs, ps = xf.copy(), pf.copy()
-    for k in range(ev.t.size - 2, -1, -1):
-        f = transition(ev.t[k + 1] - ev.t[k], layout.n, ev.use_bias, layout.drift_pairs)
-        xs[k], ps[k] = rts_step((xf[k], pf[k]), (xp[k + 1], pp[k + 1]), (xs[k + 1], ps[k + 1]), f)
-    return xs, ps
+@compiled
+def _backward(
+    t: FloatArray,
+    filtered: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+    dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool],
+) -> None:
+    """The Rauch-Tung-Striebel pass (:func:`.kalman.rts_step`) back over the filtered events, in
+    place: the filtered states and covariances become the smoothed ones. Each prior covariance
+    is made again from the filtered one before it, as :func:`_forward` made it."""
+    xp, xs, ps, released = filtered
+    _, q_accel, q_state, drifts, use_bias = dynamics
+    n = xs.shape[1]
+    for k in range(t.size - 2, -1, -1):
+        dt = t[k + 1] - t[k]
+        f = transition(dt, n, use_bias, drifts)
+        pp = ps[k].copy()  # still the filtered covariance at k
+        if dt > 0:
+            q = process_noise(dt, q_accel[k + 1], q_state[k + 1], n, use_bias, drifts)
+            pp = matmul(matmul(f, pp), f.T) + q
+        pp[0, 0] += released[k + 1, 0]
+        pp[1, 1] += released[k + 1, 1]
+        xs[k], ps[k] = rts_step((xs[k], ps[k]), (xp[k + 1], pp), (xs[k + 1], ps[k + 1]), f)
