@@ -226,6 +226,17 @@ def test_the_sensors_refuse_an_accelerometer_they_all_contradict() -> None:
     assert not accel_refused(one_air, one_air.accel.on_clock).any()
 
 
+def test_the_normalised_innovations_check_the_noise_model() -> None:
+    """Issue 15, item 4: each sensor's mean squared normalised innovation is recorded; about 1
+    with the noise learnt from the log, far below 1 with a noise 10x too large given."""
+    inputs, _, _ = _wrong_accelerometer(("gps", "baro"))
+    learnt = fuse_smoother(inputs, SmootherParams()).params
+    assert 0.7 < learnt["nis_gps"] < 1.4
+    assert 0.7 < learnt["nis_baro"] < 1.4
+    told = fuse_smoother(inputs, SmootherParams(sigma_m={"baro": 2.0})).params
+    assert told["nis_baro"] < 0.1
+
+
 def test_accelerometer_spikes_add_their_excess_as_unknown() -> None:
     rng = np.random.default_rng(4)
     t = np.arange(0.0, 100.0, 0.02)

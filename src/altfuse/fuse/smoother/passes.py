@@ -39,7 +39,7 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
     dynamics = (
         ev.a, q_accel, np.ascontiguousarray(ev.q_state, dtype=np.float64), drifts, ev.use_bias
     )  # fmt: skip
-    xp, xf, pf, released, gain_h, accepted, loglik = _forward(
+    xp, xf, pf, released, gain_h, accepted, loglik, nu = _forward(
         (ev.t, ev.who.astype(np.int64), ev.z, np.asarray(r, dtype=np.float64), h),
         dynamics,
         ev.still.astype(np.bool_),
@@ -48,7 +48,9 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
     )
     if smooth:
         _backward(ev.t, (xp, xf, pf, released), dynamics)
-    return {"x": xf, "p": pf, "gain_h": gain_h, "accepted": accepted, "loglik": loglik}
+    return {
+        "x": xf, "p": pf, "gain_h": gain_h, "accepted": accepted, "loglik": loglik, "nu": nu
+    }  # fmt: skip
 
 
 @compiled
@@ -58,10 +60,13 @@ def _forward(
     still: np.ndarray,
     gate: float,
     start: tuple[FloatArray, FloatArray],
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray, FloatArray]:
+) -> tuple[
+    FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray, FloatArray, FloatArray
+]:
     """The forward filter: each event's prior state, posterior state and covariance, what the
     lockout release added to the prior's (h, v) variances there, each sample's gain on h,
-    whether it passed the gate, and its log-likelihood. The priors' covariances are not kept
+    whether it passed the gate, its log-likelihood and its normalised innovation
+    ``y / sqrt(S)``. The priors' covariances are not kept
     (a flight's worth is hundreds of megabytes): :func:`_backward` makes them again.
 
     ``measured``: the events' times, series (-1 a tick), values, variances and rows of H;
@@ -80,6 +85,7 @@ def _forward(
     gain_h = np.zeros(count)
     accepted = np.zeros(count, dtype=np.bool_)
     loglik = np.full(count, np.nan)
+    nu = np.full(count, np.nan)
     u = np.zeros(n)
     y = s = 0.0
     ph = np.zeros(n)
@@ -107,6 +113,8 @@ def _forward(
                 p[1, 1] += released[k, 1]
                 y, s, ph = innovation(x, p, z[k], h[k], r[k])
         xp[k] = x
+        if i >= 0:
+            nu[k] = y / math.sqrt(s)
         # the innovation gate: |y| <= gate sqrt(S)
         if i >= 0 and y * y <= gate * gate * s:
             x, p, kg = update(x, p, y, s, ph)
@@ -118,7 +126,7 @@ def _forward(
         if still[k]:
             x, p = hold_still(x, p)
         xf[k], pf[k] = x, p
-    return xp, xf, pf, released, gain_h, accepted, loglik
+    return xp, xf, pf, released, gain_h, accepted, loglik, nu
 
 
 @compiled
