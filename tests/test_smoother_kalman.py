@@ -52,9 +52,14 @@ def filterpy_passes(
     """filterpy's filtered and smoothed means and covariances over the same events."""
     n, drifts = layout.n, layout.drift_pairs
     dts = np.diff(ev.t, prepend=ev.t[0])
-    fs = [transition(dt, n, ev.use_bias, drifts) for dt in dts]
     qa = ev.q_accel + ev.q_spike
-    qs = [process_noise(dt, qa[k], ev.q_state[k], n, True, drifts) for k, dt in enumerate(dts)]
+    fs, qs = [], []
+    for k, dt in enumerate(dts):
+        f, q = np.eye(n), np.zeros((n, n))
+        transition(f, dt, ev.use_bias, drifts)
+        process_noise(q, dt, qa[k], ev.q_state[k], True, drifts)
+        fs.append(f)
+        qs.append(q)
     us = [np.array([[0.5 * ev.a[k] * dt * dt], [ev.a[k] * dt]]) for k, dt in enumerate(dts)]
     bs = [np.vstack([np.eye(2), np.zeros((n - 2, 2))])] * ev.t.size
     hs = []

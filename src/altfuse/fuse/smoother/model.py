@@ -103,16 +103,15 @@ class Layout:
 
 
 @compiled
-def transition(dt: float, n: int, use_bias: bool, drifts: np.ndarray) -> FloatArray:
-    """F over ``dt``: h += v dt - b dt^2/2, v += -b dt, c_i += r_i dt for a sensor with a drift
-    rate ``r_i`` (``drifts``: (offset, rate) state pairs); the rest random walks (identity)."""
-    f = np.eye(n)
+def transition(f: FloatArray, dt: float, use_bias: bool, drifts: np.ndarray) -> None:
+    """F over ``dt``, into ``f`` (an identity but for these entries): h += v dt - b dt^2/2,
+    v += -b dt, c_i += r_i dt for a sensor with a drift rate ``r_i`` (``drifts``: (offset,
+    rate) state pairs); the rest random walks."""
     f[0, 1] = dt
     if use_bias:
         f[0, 2], f[1, 2] = -0.5 * dt * dt, -dt
     for j in range(drifts.shape[0]):
         f[drifts[j, 0], drifts[j, 1]] = dt
-    return f
 
 
 @dataclass(frozen=True)
@@ -141,12 +140,17 @@ class Events:
 
 @compiled
 def process_noise(
-    dt: float, q_accel: float, q_state: FloatArray, n: int, use_bias: bool, drifts: np.ndarray
-) -> FloatArray:
-    """Q over an interval ``dt``: white acceleration of density ``q_accel`` on (h, v), the bias's
-    and the sensor states' random walks (``q_state``, one density per sensor), and each drifting
-    offset's integrated random walk."""
-    q = np.zeros((n, n))
+    q: FloatArray,
+    dt: float,
+    q_accel: float,
+    q_state: FloatArray,
+    use_bias: bool,
+    drifts: np.ndarray,
+) -> None:
+    """Q over an interval ``dt``, into ``q``: white acceleration of density ``q_accel`` on
+    (h, v), the bias's and the sensor states' random walks (``q_state``, one density per
+    sensor), and each drifting offset's integrated random walk."""
+    q[:] = 0.0
     # white acceleration: [[dt^3/3, dt^2/2], [dt^2/2, dt]] q_a on (h, v)
     q[0, 0], q[0, 1], q[1, 1] = q_accel * dt**3 / 3, q_accel * dt**2 / 2, q_accel * dt
     q[1, 0] = q[0, 1]
@@ -159,7 +163,6 @@ def process_noise(
         q[c, rate] = Q_DRIFT * dt**2 / 2
         q[rate, c] = q[c, rate]
         q[rate, rate] = Q_DRIFT * dt
-    return q
 
 
 def measurement_matrix(layout: Layout, who: np.ndarray) -> FloatArray:
@@ -177,14 +180,20 @@ def measurement_matrix(layout: Layout, who: np.ndarray) -> FloatArray:
 
 
 @compiled
-def hold_still(x: FloatArray, p: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """On the ground before take-off: h = 0 and v = 0 (the datum's definition)."""
+def hold_still(x: FloatArray, p: FloatArray) -> None:
+    """On the ground before take-off, in place: h = 0 and v = 0 (the datum's definition), as
+    two measurements of variance ``STILL_SIGMA^2``."""
+    n = x.size
     for j in (0, 1):
         s = p[j, j] + STILL_SIGMA**2
-        kg = p[:, j] / s
-        x = x - kg * x[j]
-        p = p - np.outer(kg, p[j])
-    return x, p
+        xj = x[j]
+        row = p[j].copy()
+        for i in range(n):
+            x[i] -= p[i, j] / s * xj
+        for i in range(n):
+            ki = p[i, j] / s
+            for c in range(n):
+                p[i, c] -= ki * row[c]
 
 
 def prior(ev: Events, layout: Layout) -> tuple[FloatArray, FloatArray]:

@@ -8,8 +8,15 @@ import math
 
 import numpy as np
 
-from altfuse.fuse.smoother.compiled import compiled, matmul
-from altfuse.fuse.smoother.kalman import innovation, predict, rts_step, update
+from altfuse.fuse.smoother.compiled import compiled
+from altfuse.fuse.smoother.kalman import (
+    innovation,
+    predict,
+    predict_covariance,
+    rts_step,
+    scratch,
+    update,
+)
 from altfuse.fuse.smoother.model import (
     Events,
     Layout,
@@ -66,8 +73,8 @@ def _forward(
     """The forward filter: each event's prior state, posterior state and covariance, what the
     lockout release added to the prior's (h, v) variances there, each sample's gain on h,
     whether it passed the gate, its log-likelihood and its normalised innovation
-    ``y / sqrt(S)``. The priors' covariances are not kept
-    (a flight's worth is hundreds of megabytes): :func:`_backward` makes them again.
+    ``y / sqrt(S)``. The priors' covariances are not kept (a flight's worth is hundreds of
+    megabytes): :func:`_backward` makes them again.
 
     ``measured``: the events' times, series (-1 a tick), values, variances and rows of H;
     ``dynamics``: the mean acceleration over the interval ending at each event, the white
@@ -76,7 +83,7 @@ def _forward(
     """
     t, who, z, r, h = measured
     a, q_accel, q_state, drifts, use_bias = dynamics
-    x, p = start
+    x, p = start[0].copy(), start[1].copy()
     count, n = h.shape
     xp = np.zeros((count, n))
     released = np.zeros((count, 2))
@@ -86,9 +93,10 @@ def _forward(
     accepted = np.zeros(count, dtype=np.bool_)
     loglik = np.full(count, np.nan)
     nu = np.full(count, np.nan)
-    u = np.zeros(n)
+    f, q, u = np.eye(n), np.zeros((n, n)), np.zeros(n)
+    work = scratch(n)
+    ph = work[4]
     y = s = 0.0
-    ph = np.zeros(n)
     previous = last_accepted = t[0]
     for k in range(count):
         dt = t[k] - previous
@@ -96,35 +104,31 @@ def _forward(
         if dt > 0:
             # the accelerometer as the control input: B u = [a dt^2 / 2, a dt, 0, ...]
             u[0], u[1] = 0.5 * a[k] * dt * dt, a[k] * dt
-            f = transition(dt, n, use_bias, drifts)
-            x, p = predict(
-                x, p, f, process_noise(dt, q_accel[k], q_state[k], n, use_bias, drifts), u
-            )
+            transition(f, dt, use_bias, drifts)
+            process_noise(q, dt, q_accel[k], q_state[k], use_bias, drifts)
+            predict(x, p, f, q, u, work)
         i = who[k]
         if i >= 0:
-            y, s, ph = innovation(x, p, z[k], h[k], r[k])
+            y, s = innovation(x, p, z[k], h[k], r[k], ph)
             if t[k] - last_accepted > LOCKOUT_S and y * y > gate * gate * s:
                 # no sample of any sensor passed the gate for LOCKOUT_S: the estimate, not
                 # every sensor, has gone astray (ArduPilot's EKF3 resets its height after
                 # 5 s); its height and velocity become as uncertain as this sample says
-                p = p.copy()
                 released[k] = y * y, (y / LOCKOUT_S) ** 2
                 p[0, 0] += released[k, 0]
                 p[1, 1] += released[k, 1]
-                y, s, ph = innovation(x, p, z[k], h[k], r[k])
-        xp[k] = x
-        if i >= 0:
+                y, s = innovation(x, p, z[k], h[k], r[k], ph)
             nu[k] = y / math.sqrt(s)
+        xp[k] = x
         # the innovation gate: |y| <= gate sqrt(S)
         if i >= 0 and y * y <= gate * gate * s:
-            x, p, kg = update(x, p, y, s, ph)
-            gain_h[k] = abs(kg[0])
+            gain_h[k] = abs(update(x, p, y, s, ph))
             accepted[k] = True
             last_accepted = t[k]
             # log N(y; 0, S)
             loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
         if still[k]:
-            x, p = hold_still(x, p)
+            hold_still(x, p)
         xf[k], pf[k] = x, p
     return xp, xf, pf, released, gain_h, accepted, loglik, nu
 
@@ -141,13 +145,15 @@ def _backward(
     xp, xs, ps, released = filtered
     _, q_accel, q_state, drifts, use_bias = dynamics
     n = xs.shape[1]
+    f, q, pp = np.eye(n), np.zeros((n, n)), np.zeros((n, n))
+    work = scratch(n)
     for k in range(t.size - 2, -1, -1):
         dt = t[k + 1] - t[k]
-        f = transition(dt, n, use_bias, drifts)
-        pp = ps[k].copy()  # still the filtered covariance at k
+        transition(f, dt, use_bias, drifts)  # the identity where dt is 0
+        pp[:] = ps[k]  # still the filtered covariance at k
         if dt > 0:
-            q = process_noise(dt, q_accel[k + 1], q_state[k + 1], n, use_bias, drifts)
-            pp = matmul(matmul(f, pp), f.T) + q
+            process_noise(q, dt, q_accel[k + 1], q_state[k + 1], use_bias, drifts)
+            predict_covariance(pp, f, q, work)
         pp[0, 0] += released[k + 1, 0]
         pp[1, 1] += released[k + 1, 1]
-        xs[k], ps[k] = rts_step((xs[k], ps[k]), (xp[k + 1], pp), (xs[k + 1], ps[k + 1]), f)
+        rts_step((xs[k], ps[k]), (xp[k + 1], pp), (xs[k + 1], ps[k + 1]), f, work)
