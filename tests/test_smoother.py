@@ -6,6 +6,7 @@ Every simulated scenario and fault: ``tests/test_smoother_accuracy.py`` and
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from click.testing import CliRunner
 from altfuse.cli import cli
 from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import SmootherParams, fuse_smoother
-from altfuse.fuse.smoother.evidence import DRIFT_GAIN
+from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record
 from altfuse.fuse.smoother.noise import (
     Q_AGREEMENT_MIN_SHARE,
     accel_refused,
@@ -224,6 +225,18 @@ def test_the_sensors_refuse_an_accelerometer_they_all_contradict() -> None:
     one_air, _, _ = _wrong_accelerometer(("baro", "baro"))
     assert one_air.accel is not None
     assert not accel_refused(one_air, one_air.accel.on_clock).any()
+
+
+def test_a_test_the_richer_model_lost_outright_is_recorded_without_its_gain() -> None:
+    """The metadata is JSON: a richer model that rejected more samples (a gain of -inf) is
+    said in words (it broke ``altfuse fuse -m smoother`` on beastayyg_sample.bin)."""
+    record = evidence_record("thermal", False, -math.inf)
+    assert record == {
+        "baro_thermal": "not modelled (it rejected more samples than the model without)"
+    }
+    json.dumps(record, allow_nan=False)
+    assert evidence_record("drift", True, 12.0)["baro_drift_loglik_gain"] == 12.0
+    assert evidence_record("drift", True, math.nan) == {}
 
 
 def test_the_normalised_innovations_check_the_noise_model() -> None:

@@ -114,7 +114,6 @@ backward step each.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -122,7 +121,7 @@ import numpy as np
 
 from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult
 from altfuse.fuse.smoother.events import contributions, interval_mean, merge_events
-from altfuse.fuse.smoother.evidence import drift_evidence, drift_record, thermal_evidence
+from altfuse.fuse.smoother.evidence import drift_evidence, evidence_record, thermal_evidence
 from altfuse.fuse.smoother.model import Events, Layout, thermal_regressors
 from altfuse.fuse.smoother.noise import (
     Q_ACCEL_NO_IMU,
@@ -243,17 +242,8 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             "model": "accelerometer-driven" if use_imu else "altitude-only random walk (no IMU)",
             "accel_noise_m2_s3": q_accel,
             "gate_sigma": params.gate_sigma,
-            **drift_record(layout, drift_gain),
-            **(
-                {}
-                if math.isnan(thermal_gain)
-                else {
-                    "baro_thermal": "modelled"
-                    if layout.has("thermal")
-                    else "not modelled (the log's evidence does not ask for it)",
-                    "baro_thermal_loglik_gain": thermal_gain,
-                }
-            ),
+            **evidence_record("drift", bool(layout.drifting), drift_gain),
+            **evidence_record("thermal", layout.has("thermal"), thermal_gain),
             **_fitted(names, ev, noise, layout, xs[-1]),
             **{f"q_terrain_{name}_m2_m": value for name, value in terrain.items()},
             **{

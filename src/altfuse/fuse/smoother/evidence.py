@@ -80,11 +80,12 @@ def drift_evidence(
     return (drifting if gain > DRIFT_GAIN else layout), gain
 
 
-def drift_record(layout: Layout, gain: float) -> dict[str, float | int | str]:
-    """The drift test's outcome for the metadata (none without a barometer)."""
+def evidence_record(what: str, modelled: bool, gain: float) -> dict[str, float | str]:
+    """A test's outcome for the metadata, ``baro_<what>`` and its log-likelihood gain (nothing
+    where there was no test; no gain where the richer model rejected more samples)."""
     if math.isnan(gain):
         return {}
     if not math.isfinite(gain):
-        return {"baro_drift": "not modelled (it rejected more samples than the stable model)"}
-    verdict = "modelled" if layout.drifting else "not modelled"
-    return {"baro_drift": verdict, "baro_drift_loglik_gain": gain}
+        return {f"baro_{what}": "not modelled (it rejected more samples than the model without)"}
+    verdict = "modelled" if modelled else "not modelled (the log's evidence does not ask for it)"
+    return {f"baro_{what}": verdict, f"baro_{what}_loglik_gain": gain}
