@@ -66,6 +66,6 @@ def test_fuse_file_is_the_csv_table_with_the_options_and_parameters_routed() -> 
     assert indexed.index[0] == pd.Timedelta(seconds=indexed.time_s.iloc[0])
     assert len(indexed.resample("1s").mean(numeric_only=True)) == 120
     with pytest.raises(InvalidParameter, match=r"^beta must be a number >= 0, got -1"):
-        altfuse.fuse_file(SAMPLE_LOG, beta=-1)
+        altfuse.fuse_file(SAMPLE_LOG, method="support", beta=-1)
     with pytest.raises(InvalidParameter, match=r"^alpha is not a parameter of method 'support'"):
-        altfuse.fuse_file(SAMPLE_LOG, alpha=0.5)
+        altfuse.fuse_file(SAMPLE_LOG, method="support", alpha=0.5)

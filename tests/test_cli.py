@@ -45,9 +45,8 @@ def test_fuse_sample_log_writes_csv_weights_and_provenance(tmp_path: Path) -> No
     assert list(table.columns) == (
         ["time_s"]
         + [f"alt_{s}_m" for s in sensors]
-        + ["fused_alt_m", "status", "n_sensors"]
+        + ["fused_alt_m", "fused_std_m", "status", "n_sensors"]
         + [f"weight_{s}" for s in sensors]
-        + [f"support_{s}" for s in sensors]
     )
     assert len(table) == 1200
     np.testing.assert_allclose(np.diff(table.time_s), 0.1, atol=1e-6)
@@ -55,15 +54,16 @@ def test_fuse_sample_log_writes_csv_weights_and_provenance(tmp_path: Path) -> No
     weights = table[[f"weight_{s}" for s in sensors]].sum(axis=1)
     np.testing.assert_allclose(weights, 1.0, atol=1e-5)
     assert table.fused_alt_m.notna().all()
+    assert (table.fused_std_m > 0).all()
     meta = json.loads((tmp_path / "out.meta.json").read_text())
     assert meta["input"]["sha256"] == before
     assert meta["altfuse_version"] == __version__
-    assert meta["method"] == "support"
+    assert meta["method"] == "smoother"  # the default
     assert {o["sensor"] for o in meta["datum"]["offsets"]} == set(sensors)
     gps = next(o for o in meta["datum"]["offsets"] if o["sensor"] == "gps")
     assert gps["offset_m"] == pytest.approx(112.0, abs=0.5)  # the simulated home, AMSL
     traces = pd.read_csv(tmp_path / "w.csv")
-    for key in ("weight", "lambda", "support", "support_mean", "support_var"):
+    for key in ("weight", "offset"):
         assert f"{key}_baro" in traces.columns
     assert not list(tmp_path.glob(".*tmp"))
 
@@ -117,10 +117,11 @@ def test_bad_files(tmp_path: Path, case: str, fragment: str) -> None:
         (["--rate", "5000"], "--rate must be at most 1000, got 5000.0"),
         (["--max-gap", "0"], "--max-gap must be a positive number, got 0.0"),
         (["--method", "kalman"], "'kalman' is not one of"),
-        (["--alpha", "-1"], "--alpha must be a positive number, got -1.0"),
-        (["--alpha", "wide"], "'wide' is neither 'auto' nor a number"),
-        (["--beta", "-1"], "--beta must be a number >= 0, got -1.0"),
-        (["--window", "-2"], "--window must be a number >= 0, got -2.0"),
+        (["-m", "support", "--alpha", "-1"], "--alpha must be a positive number, got -1.0"),
+        (["-m", "support", "--alpha", "wide"], "'wide' is neither 'auto' nor a number"),
+        (["-m", "support", "--beta", "-1"], "--beta must be a number >= 0, got -1.0"),
+        (["-m", "support", "--window", "-2"], "--window must be a number >= 0, got -2.0"),
+        (["--beta", "1"], "--beta does not apply to method 'smoother'"),
         (["--min-sensors", "0"], "--min-sensors must be a whole number >= 1, got 0"),
         (["--method", "mean", "--beta", "3"], "--beta does not apply to method 'mean'"),
         (["--method", "delay1", "--time-constant", "1"], "--time-constant does not apply"),

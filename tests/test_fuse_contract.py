@@ -15,7 +15,7 @@ import pytest
 from click.testing import CliRunner
 
 from altfuse.cli import cli
-from altfuse.fuse import METHODS, FusionInput, FusionResult, Method
+from altfuse.fuse import DEFAULT_METHOD, METHODS, FusionInput, FusionResult, Method
 from altfuse.fuse.mean import fuse_mean
 from altfuse.params import UNIT_SUFFIXES, Params, fields, flag_of, unit_of
 from altfuse.pipeline import FuseOptions
@@ -157,7 +157,7 @@ def test_a_registered_method_gets_its_cli_option(tmp_path: Path) -> None:
             cli, ["fuse", str(SAMPLE_LOG), "-o", str(tmp_path / "x.csv"), "--lean", "1"]
         )
         assert refused.exit_code == 2
-        assert "--lean does not apply to method 'support'" in refused.stderr
+        assert f"--lean does not apply to method '{DEFAULT_METHOD}'" in refused.stderr
     finally:
         del METHODS["toy"]
 

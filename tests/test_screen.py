@@ -16,7 +16,7 @@ from altfuse.cli import cli
 from altfuse.errors import NoUsableSensorsError
 from altfuse.info import damage
 from altfuse.model import FlightLog, Series
-from altfuse.pipeline import fuse_log
+from altfuse.pipeline import FuseOptions, fuse_log
 from altfuse.screen import (
     BACKWARDS,
     BELOW_MINIMUM,
@@ -197,9 +197,10 @@ def test_a_sensor_stuck_while_the_others_move_is_dropped_and_counted() -> None:
 
 
 def test_the_stuck_gps2_of_a_real_log_is_dropped_and_the_fusion_stays_with_the_others() -> None:
-    """diaven_sample01: GPS2 reports 0.00 m with a 3D fix for 68 s, then 43 m."""
+    """diaven_sample01: GPS2 reports 0.00 m with a 3D fix for 68 s, then 43 m. Support weighs
+    every valid sensor at every tick: its fused value shows the datum the stuck samples gave."""
     log = shared_log("ardupilot/diaven_sample01.bin")
-    run = fuse_log(log)
+    run = fuse_log(log, FuseOptions(method="support"))
     gps2 = next(s for s in run.log.sensors if s.name == "gps2")
     assert gps2.dropped == {STUCK: 340}
     assert gps2.value.min() > 40.0

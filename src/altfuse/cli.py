@@ -26,7 +26,7 @@ from altfuse.batch import EXIT_PARTIAL, SUMMARY, BatchOptions, LogResult, PlotFo
 from altfuse.errors import AltfuseError
 from altfuse.evaluation import TRUTHS, TruthChoice, evaluation_table
 from altfuse.evaluation import evaluate as evaluate_log
-from altfuse.fuse import METHODS, params_by_method
+from altfuse.fuse import DEFAULT_METHOD, METHODS, params_by_method
 from altfuse.info import as_text, damage, describe
 from altfuse.io import read_log
 from altfuse.job import Outputs, fuse_to_files
@@ -194,7 +194,7 @@ class _MethodCommand(click.Command):
                 click.Option(
                     ["-m", "--method"],
                     type=click.Choice(list(METHODS)),
-                    default="support",
+                    default=DEFAULT_METHOD,
                     show_default=True,
                     help="Fusion method.",
                 )
@@ -309,7 +309,7 @@ def fuse(
     Example:
       altfuse fuse flight.bin -o flight.csv
       altfuse fuse flight.bin -o flight.csv --method mean --rate 20
-      altfuse fuse flight.bin -o flight.csv --alpha 0.5 --beta 10 --weights w.csv
+      altfuse fuse flight.bin -o flight.csv -m support --alpha 0.5 --beta 10 --weights w.csv
       altfuse fuse flight.bin -o flight.csv --method multilayer --plot flight.png
       altfuse fuse flight.bin -o flight.csv --method smoother --sigma gps=0.8
     """

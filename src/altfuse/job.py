@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from altfuse.errors import ParameterError
 from altfuse.evaluation import Evaluation, evaluate_prepared, truth_or_none
-from altfuse.fuse import params_for
+from altfuse.fuse import DEFAULT_METHOD, params_for
 from altfuse.params import fields
 from altfuse.pipeline import FuseOptions, FuseRun, fuse_log, prepare_log, run_method
 from altfuse.plot import check_plot_path, run_figure, writer
@@ -106,7 +106,7 @@ def fuse_to_files(
 
 
 def fuse_file(
-    path: str | Path, method: str = "support", *, time_index: bool = False, **values: Any
+    path: str | Path, method: str = DEFAULT_METHOD, *, time_index: bool = False, **values: Any
 ) -> pd.DataFrame:
     """The fused table of the log at ``path``, as ``altfuse fuse`` writes it to CSV.
 

@@ -15,7 +15,7 @@ from altfuse import __version__
 from altfuse.align import Aligned, Lag, Span, align, gps_lags, shift, splices
 from altfuse.datum import Referral, Referred, refer_to_takeoff, referred_samples, tilt_correct
 from altfuse.errors import NoUsableSensorsError, ParameterError, UnsupportedLogError
-from altfuse.fuse import METHODS, FusionInput, FusionResult, Method, method
+from altfuse.fuse import DEFAULT_METHOD, METHODS, FusionInput, FusionResult, Method, method
 from altfuse.guard import guard
 from altfuse.inertial import referred_vertical_acceleration
 from altfuse.io import read_log
@@ -34,7 +34,7 @@ class FuseOptions:
     several); a method not in it runs with its defaults.
     """
 
-    method: str = "support"
+    method: str = DEFAULT_METHOD
     params: Mapping[str, Params] = field(default_factory=dict)
     rate_hz: float = param(
         10.0, help="rate of the common clock", unit="Hz", check="positive", maximum=1000.0
