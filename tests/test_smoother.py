@@ -212,6 +212,12 @@ def _wrong_accelerometer(kinds: tuple[str, str]) -> tuple[FusionInput, np.ndarra
     return FusionInput.from_heights(z, 0.1, kinds=kinds, accel_up=a), h, t
 
 
+def a_of(inputs: FusionInput) -> np.ndarray:
+    """The vertical acceleration ``inputs`` was given at its ticks."""
+    assert inputs.accel is not None
+    return inputs.accel.on_clock
+
+
 def test_the_sensors_refuse_an_accelerometer_they_all_contradict() -> None:
     """Issue 15, item 2: where a GPS and a barometer agree against the accelerometer for seconds,
     its noise is raised there, and only there; two barometers are one witness."""
@@ -225,6 +231,13 @@ def test_the_sensors_refuse_an_accelerometer_they_all_contradict() -> None:
     one_air, _, _ = _wrong_accelerometer(("baro", "baro"))
     assert one_air.accel is not None
     assert not accel_refused(one_air, one_air.accel.on_clock).any()
+    # a third sensor absent there has no vote, and takes none away
+    gone = np.where(((t > 50) & (t < 70))[:, None], np.nan, inputs.z[:, :1])
+    three = FusionInput.from_heights(
+        np.column_stack([inputs.z, gone]), 0.1, ("gps", "baro", "gps"), accel_up=a_of(inputs)
+    )
+    assert three.accel is not None
+    assert accel_refused(three, three.accel.on_clock)[(t >= 60.5) & (t < 62.5)].min() > 1.0
 
 
 def test_a_test_the_richer_model_lost_outright_is_recorded_without_its_gain() -> None:

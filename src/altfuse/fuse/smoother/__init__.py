@@ -277,7 +277,7 @@ def _accelerometer(inputs: FusionInput, times: FloatArray) -> tuple[FloatArray, 
 
 
 #: How each regressor is recorded: the key's pattern and unit.
-_RECORD = {"thermal": "thermal_{}_m_per_degC", "scale": "scale_error_{}", "lag": "lag_{}_s"}
+_RECORD = {"thermal": "thermal_{}_m_per_degC"}
 
 
 def _fitted(

@@ -136,19 +136,29 @@ def accel_refused(inputs: FusionInput, a: FloatArray) -> FloatArray:
     # sensors' (a change of acceleration inside it must not count)
     step = np.diff(t, prepend=t[0])
     h_accel = np.cumsum(np.cumsum(a * step) * step)
-    changes = []
+    changes, kinds = [], []
     for i in steady:
         valid = np.isfinite(z[:, i])
         if valid.sum() < 10:
-            return extra
+            continue
         sigma = white_noise_sigma(z[valid, i])
         d, sxx = _slope(t, z[:, i] - h_accel, width)
         r = d[span:] - d[:-span]
         bound = CHECK_SIGMAS * sigma * np.sqrt(1 / sxx[span:] + 1 / sxx[:-span]) + CHECK_FLOOR_M_S
-        changes.append(np.where(np.abs(r) > bound, r, np.nan))
+        # NaN: the sensor has no vote there (too few samples around either end)
+        changes.append(np.where(np.abs(r) > bound, r, np.where(np.isfinite(r), 0.0, np.nan)))
+        kinds.append(inputs.kinds[i])
+    if len(set(kinds)) < 2:
+        return extra
     r = np.array(changes)
-    agreed = np.isfinite(r).all(axis=0) & ((r > 0).all(axis=0) | (r < 0).all(axis=0))
-    least = np.where(agreed, np.nanmin(np.abs(np.nan_to_num(r, nan=np.inf)), axis=0), 0.0)
+    voting = np.isfinite(r)
+    kinds_voting = sum(voting[[k == kind for k in kinds]].any(axis=0) for kind in set(kinds))
+    side = np.where(voting, np.sign(r), np.nan)
+    agreed = (kinds_voting >= 2) & (
+        np.nanmin(side, axis=0, initial=np.inf) == np.nanmax(side, axis=0, initial=-np.inf)
+    )
+    agreed &= np.nanmin(np.where(voting, np.abs(side), np.inf), axis=0) > 0
+    least = np.where(agreed, np.min(np.where(voting, np.abs(r), np.inf), axis=0), 0.0)
     density = least**2 / (span * dt)
     for j in range(span + 1):  # every tick of a refused span
         extra[j : j + density.size] = np.maximum(extra[j : j + density.size], density)
