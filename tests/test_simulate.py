@@ -114,6 +114,18 @@ def test_faults(fault: str, tmp_path: Path) -> None:
     elif fault == "gps-glitch":
         jump = b["gps"].value - a["gps"].value
         assert np.sum(np.isclose(jump, 15.0, atol=1e-3)) == 25  # 5 s at 5 Hz
+    elif fault == "imu-impact":  # one sample 25 g up (-Z in FRD)
+        assert clean.imu is not None
+        assert faulty.imu is not None
+        dz = faulty.imu.acc[:, 2] - clean.imu.acc[:, 2]
+        assert np.sum(np.abs(dz) > 1e-6) == 1
+        assert dz.min() == pytest.approx(-25 * 9.80665, rel=1e-3)
+    elif fault == "attitude-error":  # the logged roll 30 degrees off for 10 s (10 Hz)
+        assert clean.attitude is not None
+        assert faulty.attitude is not None
+        off = np.rad2deg(faulty.attitude.roll - clean.attitude.roll)
+        assert np.sum(np.isclose(off, 30.0, atol=1e-3)) == 100
+        assert np.sum(np.abs(off) > 1e-3) == 100
     else:  # baro-drift: 0.05 m/s from 40 % of the flight
         assert (b["baro"].value - a["baro"].value)[-1] == pytest.approx(0.05 * 72, abs=0.1)
 

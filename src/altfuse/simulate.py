@@ -17,7 +17,11 @@ Scenarios (``SCENARIOS``): ``paper-a`` (Paper A's experiment: level flight near 
 barometer departing, then every sensor scattering), ``hover`` (Paper B's hover at 240 m),
 ``mission`` (take-off, climb, cruise over uneven ground, landing). Faults (``FAULTS``) can be
 added to any: ``baro-drift``, ``gps-glitch``, ``rangefinder-dropout``, ``lose-gps``,
-``lose-baro``, ``lose-rangefinder``.
+``lose-baro``, ``lose-rangefinder``, and two the real logs showed the accelerometer do:
+``imu-impact`` (one IMU sample of 25 g, an impact or a clipped sample: 5 m/s of velocity in one
+50 Hz sample) and ``attitude-error`` (the logged roll 30 degrees off for 10 s: gravity rotated
+into the vertical, 1.3 m/s^2 of false acceleration, as a plane's attitude error at large bank
+angles).
 """
 
 from __future__ import annotations
@@ -213,6 +217,8 @@ FAULTS = (
     "lose-gps",
     "lose-baro",
     "lose-rangefinder",
+    "imu-impact",
+    "attitude-error",
 )
 
 
@@ -342,10 +348,16 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         ]
     )
     f_body = f_body + rng.normal(0.0, 0.15, (3, ts.size)) + np.array([[0.0], [0.0], [0.05]])
+    if "imu-impact" in faults:  # up is -Z in FRD
+        f_body[2, np.searchsorted(ts, 0.45 * duration)] -= 25.0 * G
     log("IMU", ts, 0, *f_body)
 
     ts = at(10.0)
-    log("ATT", ts, np.rad2deg(truth(ts, p.roll)), np.rad2deg(truth(ts, p.pitch)), 0.0)
+    roll_logged = np.rad2deg(truth(ts, p.roll))
+    if "attitude-error" in faults:
+        lo, hi = _fault_window(duration, 0.55, 10.0)
+        roll_logged = roll_logged + np.where((ts >= lo) & (ts < hi), 30.0, 0.0)
+    log("ATT", ts, roll_logged, np.rad2deg(truth(ts, p.pitch)), 0.0)
     log("SIM", ts, HOME_AMSL_M + truth(ts, p.height_m))
     return SimulatedFlight(scenario, seed, duration, tuple(faults), p, records)
 
