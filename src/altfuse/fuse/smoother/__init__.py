@@ -219,11 +219,11 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     layout, drift_gain = drift_evidence(
         ev, noise.r(who), layout, kinds, chosen if physical is ev else None
     )
-    for npass in range(EM_PASSES + 1):
-        out = run(ev, noise.r(who), layout)
-        if npass == EM_PASSES:
-            break
+    out = run(ev, noise.r(who), layout)
+    for _ in range(EM_PASSES):
         em_scale(ev, layout, noise, out)
+        del out  # its covariances (190 MB a pass on a 300 MB log) go before the next pass's
+        out = run(ev, noise.r(who), layout)
 
     tick = who == -1
     xs, ps = out["x"][tick], out["p"][tick]

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from altfuse.fuse.smoother.model import Events, Layout
-from altfuse.fuse.smoother.passes import run
+from altfuse.fuse.smoother.passes import likelihood
 from altfuse.model import FloatArray
 
 #: Log-likelihood gain that adds the drift rates (or the temperature coefficients): half the
@@ -55,7 +55,7 @@ def thermal_evidence(
     if not layout.has("thermal"):
         return layout, math.nan, None
     plain = layout.without("thermal")
-    without, richer = run(physical, r, plain, False), run(physical, r, layout, False)
+    without, richer = likelihood(physical, r, plain), likelihood(physical, r, layout)
     gain = evidence_gain(without, richer)
     return (layout, gain, richer) if gain > DRIFT_GAIN else (plain, gain, without)
 
@@ -74,8 +74,8 @@ def drift_evidence(
         return layout, math.nan
     drifting = layout.with_drift(kinds)
     gain = evidence_gain(
-        stable if stable is not None else run(ev, r, layout, False),
-        run(ev, r, drifting, False),
+        stable if stable is not None else likelihood(ev, r, layout),
+        likelihood(ev, r, drifting),
     )
     return (drifting if gain > DRIFT_GAIN else layout), gain
 

@@ -40,24 +40,46 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
     models.
     """
     x0, p0 = prior(ev, layout)
-    drifts = layout.drift_pairs.astype(np.int64)
-    h = measurement_matrix(layout, ev.who)
-    q_accel = ev.q_accel + np.asarray(ev.q_spike, dtype=np.float64)
-    dynamics = (
-        ev.a, q_accel, np.ascontiguousarray(ev.q_state, dtype=np.float64), drifts, ev.use_bias
-    )  # fmt: skip
+    dynamics = _dynamics(ev, layout)
     xp, xf, pf, released, gain_h, accepted, loglik, nu = _forward(
-        (ev.t, ev.who.astype(np.int64), ev.z, np.asarray(r, dtype=np.float64), h),
-        dynamics,
-        ev.still.astype(np.bool_),
-        ev.gate,
-        (x0, p0),
+        _measured(ev, r, layout), dynamics, ev.still.astype(np.bool_), ev.gate, (x0, p0), True
     )
     if smooth:
         _backward(ev.t, (xp, xf, pf, released), dynamics)
     return {
         "x": xf, "p": pf, "gain_h": gain_h, "accepted": accepted, "loglik": loglik, "nu": nu
     }  # fmt: skip
+
+
+def likelihood(ev: Events, r: FloatArray, layout: Layout) -> dict[str, np.ndarray]:
+    """The forward filter's verdicts alone: which samples it accepted and their log-likelihood
+    (:func:`run` without keeping any covariance: a flight's worth is hundreds of megabytes)."""
+    _, _, _, _, _, accepted, loglik, _ = _forward(
+        _measured(ev, r, layout),
+        _dynamics(ev, layout),
+        ev.still.astype(np.bool_),
+        ev.gate,
+        prior(ev, layout),
+        False,
+    )
+    return {"accepted": accepted, "loglik": loglik}
+
+
+def _measured(
+    ev: Events, r: FloatArray, layout: Layout
+) -> tuple[FloatArray, np.ndarray, FloatArray, FloatArray, FloatArray]:
+    """The events' times, series, values, variances and rows of H, as the kernels take them."""
+    h = measurement_matrix(layout, ev.who)
+    return ev.t, ev.who.astype(np.int64), ev.z, np.asarray(r, dtype=np.float64), h
+
+
+def _dynamics(
+    ev: Events, layout: Layout
+) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool]:
+    """The events' accelerations and process-noise densities, as the kernels take them."""
+    q_accel = ev.q_accel + np.asarray(ev.q_spike, dtype=np.float64)
+    q_state = np.ascontiguousarray(ev.q_state, dtype=np.float64)
+    return ev.a, q_accel, q_state, layout.drift_pairs.astype(np.int64), ev.use_bias
 
 
 @compiled
@@ -67,6 +89,7 @@ def _forward(
     still: np.ndarray,
     gate: float,
     start: tuple[FloatArray, FloatArray],
+    keep: bool,
 ) -> tuple[
     FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray, FloatArray, FloatArray
 ]:
@@ -79,16 +102,18 @@ def _forward(
     ``measured``: the events' times, series (-1 a tick), values, variances and rows of H;
     ``dynamics``: the mean acceleration over the interval ending at each event, the white
     acceleration density there, the sensor states' densities, the drifting offsets' (offset,
-    rate) state pairs and whether the bias is a state; ``start``: the prior.
+    rate) state pairs and whether the bias is a state; ``start``: the prior; ``keep``: whether
+    to keep the states and covariances (else one slot, overwritten).
     """
     t, who, z, r, h = measured
     a, q_accel, q_state, drifts, use_bias = dynamics
     x, p = start[0].copy(), start[1].copy()
     count, n = h.shape
-    xp = np.zeros((count, n))
+    kept = count if keep else 1
+    xp = np.zeros((kept, n))
     released = np.zeros((count, 2))
-    xf = np.zeros((count, n))
-    pf = np.zeros((count, n, n))
+    xf = np.zeros((kept, n))
+    pf = np.zeros((kept, n, n))
     gain_h = np.zeros(count)
     accepted = np.zeros(count, dtype=np.bool_)
     loglik = np.full(count, np.nan)
@@ -119,7 +144,7 @@ def _forward(
                 p[1, 1] += released[k, 1]
                 y, s = innovation(x, p, z[k], h[k], r[k], ph)
             nu[k] = y / math.sqrt(s)
-        xp[k] = x
+        xp[k if keep else 0] = x
         # the innovation gate: |y| <= gate sqrt(S)
         if i >= 0 and y * y <= gate * gate * s:
             gain_h[k] = abs(update(x, p, y, s, ph))
@@ -129,7 +154,7 @@ def _forward(
             loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
         if still[k]:
             hold_still(x, p)
-        xf[k], pf[k] = x, p
+        xf[k if keep else 0], pf[k if keep else 0] = x, p
     return xp, xf, pf, released, gain_h, accepted, loglik, nu
 
 
