@@ -112,7 +112,7 @@ on a linear-Gaussian toy to 1e-9 (``tests/test_smoother_kalman.py``). filterpy i
 used here: each step carries one scalar measurement of any sensor, or none (a clock tick),
 gated, and the gains per sensor are needed for the contributions. Cost is linear in the
 number of events: 10 us an event on a 1-hour flight with its 400 Hz IMU
-(``benchmarks/smoother_bench.py``), 2.7-2.9x ``support``'s time on a 300 MB log end to end.
+(``benchmarks/smoother_bench.py``), about 3x ``support``'s time on a 300 MB log end to end.
 """
 
 from __future__ import annotations
