@@ -17,6 +17,7 @@ from click.testing import CliRunner
 from altfuse.cli import cli
 from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import SmootherParams, fuse_smoother
+from altfuse.fuse.smoother.compiled import _forget_other_versions
 from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record
 from altfuse.fuse.smoother.noise import (
     Q_AGREEMENT_MIN_SHARE,
@@ -302,3 +303,20 @@ def test_sensors_that_agree_tighten_the_default_random_walks() -> None:
     )
     res = fuse_smoother(FusionInput.from_heights(wander, 0.1), SmootherParams())
     assert res.params["q_offset_gps_m2_s"] == pytest.approx(0.01)  # the default, untouched
+
+
+def test_the_compiled_cache_is_kept_for_one_version_of_the_sources(tmp_path: Path) -> None:
+    """numba keys a cached kernel on its own file only; a change to a step it calls, in
+    another file, must not leave the old kernel cached."""
+    (tmp_path / "steps.py").write_text("x = 1\n")
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    (cache / "passes.kernel-1.py311.nbi").write_text("old")
+    _forget_other_versions(tmp_path)
+    assert not list(cache.glob("*.nbi"))  # made from unknown sources: gone
+    (cache / "passes.kernel-1.py311.nbi").write_text("new")
+    _forget_other_versions(tmp_path)
+    assert list(cache.glob("*.nbi"))  # the same sources: kept
+    (tmp_path / "steps.py").write_text("x = 2\n")
+    _forget_other_versions(tmp_path)
+    assert not list(cache.glob("*.nbi"))

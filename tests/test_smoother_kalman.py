@@ -39,8 +39,8 @@ def toy(seed: int, accel: bool) -> tuple[Events, Layout, np.ndarray]:
     a = -3 / 16 * np.sin(t / 4) + rng.normal(0, 0.1, count) if accel else np.zeros(count)
     q_state = np.tile([0.01, 1e-4], (count, 1))
     still = np.zeros(count, dtype=bool)
-    spikes = np.zeros(count)
-    events = Events(t, who, z, a, q_state, still, 0.05, spikes, True, np.inf, float(z[who >= 0][0]))
+    q_accel = np.full(count, 0.05)
+    events = Events(t, who, z, a, q_state, still, q_accel, True, np.inf, float(z[who >= 0][0]))
     scale = Regressor("scale", 1, np.where(who == 1, truth, 0.0), 0.02)
     layout = Layout(np.ones(M), (scale,), drifting=(1,))
     return events, layout, r
@@ -52,7 +52,7 @@ def filterpy_passes(
     """filterpy's filtered and smoothed means and covariances over the same events."""
     n, drifts = layout.n, layout.drift_pairs
     dts = np.diff(ev.t, prepend=ev.t[0])
-    qa = ev.q_accel + ev.q_spike
+    qa = ev.q_accel
     fs, qs = [], []
     for k, dt in enumerate(dts):
         f, q = np.eye(n), np.zeros((n, n))

@@ -202,23 +202,22 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     if inputs.on_ground_s is not None:
         lo, hi = inputs.on_ground_s
         still = (who == -1) & (times >= lo) & (times <= hi)
-    a, q_spike = _accelerometer(inputs, times)
+    a, q_added = _accelerometer(inputs, times)
     first = [s.value[0] for s in samples if s.value.size]
     h0 = float(np.median(first)) if first else 0.0
     sign = np.array([-1.0 if k == "rangefinder" else 1.0 for k in kinds])
     layout = Layout(sign, tuple(thermal_regressors(inputs.temperatures, samples, who, position)))
     q_events, terrain = state_noise(inputs, times, params.offset_noise_m2_s)
     ev = Events(
-        times, who, values, a, q_events, still, q_accel, q_spike, use_imu, params.gate_sigma, h0
+        times, who, values, a, q_events, still, q_accel + q_added, use_imu, params.gate_sigma, h0
     )
     physical = ev
     if params.offset_noise_m2_s:
         physical = replace(ev, q_state=state_noise(inputs, times, {})[0])
-    layout, thermal_gain, chosen = thermal_evidence(physical, noise.r(who), layout)
+    r = noise.r(who)  # before EM: the local noises as they are
+    layout, thermal_gain, chosen = thermal_evidence(physical, r, layout)
     # the thermal test's pass of the layout chosen, where it was made with these noises
-    layout, drift_gain = drift_evidence(
-        ev, noise.r(who), layout, kinds, chosen if physical is ev else None
-    )
+    layout, drift_gain = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
     out = run(ev, noise.r(who), layout)
     for _ in range(EM_PASSES):
         em_scale(ev, layout, noise, out)

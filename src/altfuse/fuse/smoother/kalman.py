@@ -21,10 +21,13 @@ import numpy as np
 from altfuse.fuse.smoother.compiled import compiled
 from altfuse.model import FloatArray
 
+#: Work arrays for ``n`` states (:func:`scratch`): three (n, n), two (n,).
+Scratch = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+
 
 @compiled
-def scratch(n: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Work arrays for ``n`` states: three (n, n), two (n,)."""
+def scratch(n: int) -> Scratch:
+    """Work arrays for ``n`` states."""
     return np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)), np.zeros(n), np.zeros(n)
 
 
@@ -35,7 +38,7 @@ def predict(
     f: FloatArray,
     q: FloatArray,
     u: FloatArray,
-    work: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
+    work: Scratch,
 ) -> None:
     """The prior at the next step, in place: the state and its covariance carried through F."""
     xw = work[3]
@@ -55,7 +58,7 @@ def predict_covariance(
     p: FloatArray,
     f: FloatArray,
     q: FloatArray,
-    work: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
+    work: Scratch,
 ) -> None:
     """The prior's covariance, in place (:func:`predict` without the state)."""
     fp = work[0]
@@ -122,7 +125,7 @@ def rts_step(
     predicted_next: tuple[FloatArray, FloatArray],
     smoothed_next: tuple[FloatArray, FloatArray],
     f: FloatArray,
-    work: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
+    work: Scratch,
 ) -> None:
     """One backward step, in place: ``smoothed`` holds the filtered (x, P) at ``k`` and
     becomes the smoothed one, from the prior at ``k + 1`` (``F`` between them) and the smoothed
@@ -161,7 +164,7 @@ def _smoother_gain(
     pf: FloatArray,
     pp: FloatArray,
     f: FloatArray,
-    work: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
+    work: Scratch,
 ) -> None:
     """The RTS gain into ``work[0]``: C = P_f F' P_p(k+1)^-1, solved, not inverted
     (P_p C' = F P_f, with P_p = L L' symmetric positive definite)."""

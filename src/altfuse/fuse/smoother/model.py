@@ -121,8 +121,9 @@ class Events:
     """What the forward pass steps through, one entry per event (a sample or a clock tick).
 
     ``who``: the sensor of a sample, -1 for a tick; ``z``: the sample's value; ``a``: the mean
-    vertical acceleration over the interval ending at the event, ``q_spike`` the acceleration
-    noise density its spikes add there [m^2/s^3]; ``q_state`` (events, m): the
+    vertical acceleration over the interval ending at the event, ``q_accel`` the white
+    acceleration noise density there [m^2/s^3] (the flight's, and what spikes and the sensors'
+    refusals add); ``q_state`` (events, m): the
     sensor states' random-walk densities over that interval; ``still``: the events at which the
     vehicle is known to stand at the take-off point; ``h0``: the first height guess.
     """
@@ -133,8 +134,7 @@ class Events:
     a: FloatArray
     q_state: FloatArray
     still: np.ndarray
-    q_accel: float
-    q_spike: FloatArray
+    q_accel: FloatArray
     use_bias: bool
     gate: float
     h0: float

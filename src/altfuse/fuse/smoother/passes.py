@@ -77,9 +77,8 @@ def _dynamics(
     ev: Events, layout: Layout
 ) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool]:
     """The events' accelerations and process-noise densities, as the kernels take them."""
-    q_accel = ev.q_accel + np.asarray(ev.q_spike, dtype=np.float64)
     q_state = np.ascontiguousarray(ev.q_state, dtype=np.float64)
-    return ev.a, q_accel, q_state, layout.drift_pairs.astype(np.int64), ev.use_bias
+    return ev.a, ev.q_accel, q_state, layout.drift_pairs.astype(np.int64), ev.use_bias
 
 
 @compiled
