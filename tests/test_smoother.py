@@ -14,11 +14,14 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
+from accuracy import verdict
 from altfuse.cli import cli
+from altfuse.evaluation import evaluate
 from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import SmootherParams, fuse_smoother
 from altfuse.fuse.smoother.compiled import _forget_other_versions
 from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record
+from altfuse.fuse.smoother.model import OFFSET_PRIOR, STILL_SIGMA, datum_priors
 from altfuse.fuse.smoother.noise import (
     Q_AGREEMENT_MIN_SHARE,
     accel_refused,
@@ -28,9 +31,10 @@ from altfuse.fuse.smoother.noise import (
     wander_bound,
 )
 from altfuse.fuse.smoother.passes import LOCKOUT_S
+from altfuse.model import Samples
 from altfuse.params import InvalidParameter
 from altfuse.simulate import simulate_flight, write_simulated_log
-from conftest import ROOT
+from conftest import ROOT, shared_log
 
 FAULTS = ROOT / "sample_logs" / "mission_faults.bin"
 
@@ -320,3 +324,28 @@ def test_the_compiled_cache_is_kept_for_one_version_of_the_sources(tmp_path: Pat
     (tmp_path / "steps.py").write_text("x = 2\n")
     _forget_other_versions(tmp_path)
     assert not list(cache.glob("*.nbi"))
+
+
+def test_an_offset_measured_on_the_ground_is_known_to_its_standard_error() -> None:
+    rng = np.random.default_rng(0)
+    t = np.arange(100) * 0.1
+    noisy = Samples(t, rng.normal(0.0, 0.1, t.size))
+    priors = datum_priors([noisy, noisy, Samples(t[:2], np.zeros(2))], [(0.0, 9.9), None, (0, 9)])
+    # 0.1 m over root 100 samples, with how well standing at the take-off point holds
+    assert priors[0] == pytest.approx(math.hypot(0.01, STILL_SIGMA), rel=0.15)
+    assert priors[1] == OFFSET_PRIOR  # matched to another sensor: nothing better known
+    assert priors[2] == OFFSET_PRIOR  # two samples say too little
+
+
+def test_a_log_that_starts_just_before_take_off_gets_its_datum_from_the_ground() -> None:
+    """The 4.5 plane's log starts 3 s before take-off: no span to hold h = 0 in, and the 1 m
+    offset priors alone made fused_std 0.58 m (coverage 1.00) where the datum, measured on the
+    ground window, is known to centimetres."""
+    ev = evaluate(shared_log("truth/plane_4.5.0dev_eozbademci_autotest_climb88m.BIN"), ["smoother"])
+    assert ev.prepared.referred.on_ground_s is None
+    windows = ev.prepared.referred.datum_windows
+    assert all(w is not None for w in windows)
+    sigma = ev.runs["smoother"].result.tick_traces["fused_std"]
+    assert 0.01 < np.nanmedian(sigma) < 0.05  # measured 0.027 m
+    assert ev.runs["smoother"].result.params["offset_prior_gps_m"] < 0.05  # in the metadata
+    assert 0.90 <= verdict(ev, "smoother")["coverage"] <= 0.99  # measured 0.969

@@ -97,6 +97,7 @@ class Offset:
     scale: float = 1.0
     scale_std: float | None = None
     scale_method: str | None = None  # None: not a barometer
+    on_ground: bool = False  # measured over the ground window (else matched, or a clearance)
 
 
 @dataclass(frozen=True)
@@ -147,6 +148,14 @@ class Referred:
     dropped: dict[str, str]
     segments: tuple[Segment, ...] = ()  # empty: the log is one segment
     on_real_ground: bool = False  # the ground window lies before a detected take-off
+
+    @property
+    def datum_windows(self) -> tuple[tuple[float, float] | None, ...]:
+        """Per source, the span over which its offset was measured standing at the take-off
+        point (the ground window before a detected take-off); None where it was not."""
+        return tuple(
+            o.window_s if self.on_real_ground and o.on_ground else None for o in self.offsets
+        )
 
     @property
     def on_ground_s(self) -> tuple[float, float] | None:
@@ -373,6 +382,7 @@ def _refer(
         on_ground = ground.window & valid
         if on_ground.sum() >= MIN_WINDOW_TICKS or (i == ref and on_ground.any()):
             sel, base, how = on_ground, np.zeros_like(t), f"median over the {ground.how}"
+            measured = True
         elif name in ground.clearances and ground.real:
             clearance = ground.clearances[name]
             how = f"its ground clearance, {clearance:.2f} m (no valid reading on the ground)"
@@ -389,10 +399,11 @@ def _refer(
                 continue
             base = h[:, ref]
             how = f"median difference from {aligned.names[ref]} (no samples on the ground)"
+            measured = False
         offset = float(np.median(z[sel, i] - scale * base[sel]))
         sel_t = t[sel]
         window = (float(sel_t[0]), float(sel_t[-1]))
-        offsets[i] = Offset(name, offset, how, window, int(sel.sum()), scale)
+        offsets[i] = Offset(name, offset, how, window, int(sel.sum()), scale, on_ground=measured)
         h[:, i] = (z[:, i] - offset) / scale
     return offsets, h, dropped
 

@@ -217,6 +217,7 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         gps_velocity_up=velocity,
         vibration=flight.vibration,
         imu_rate_hz=imu_rate,
+        datum_windows=referred.datum_windows,
     )
 
 

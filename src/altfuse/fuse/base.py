@@ -59,6 +59,10 @@ class FusionInput:
     vibration, imu_rate_hz
         The accelerometer's logged vibration and clipping (VIBE), and the rate [Hz] at which
         its samples are logged: how far to trust it; None if the log cannot tell.
+    datum_windows
+        Each sensor's span [s] over which its offset was measured standing at the take-off
+        point, in ``z``'s order; None where it was not (matched to another sensor, a log
+        without a take-off).
     """
 
     t: FloatArray
@@ -74,6 +78,7 @@ class FusionInput:
     gps_velocity_up: Samples | None = None
     vibration: Vibration | None = None
     imu_rate_hz: float | None = None
+    datum_windows: tuple[tuple[float, float] | None, ...] = ()
 
     def __post_init__(self) -> None:
         n = self.z.shape[1] if self.z.ndim == 2 else -1
@@ -84,6 +89,8 @@ class FusionInput:
                 raise ValueError(f"{len(getattr(self, what))} {what} for {n} sensors")
         if not self.temperatures:
             object.__setattr__(self, "temperatures", (None,) * n)
+        if not self.datum_windows:
+            object.__setattr__(self, "datum_windows", (None,) * n)
         if self.accel is not None and self.accel.on_clock.shape != self.t.shape:
             shape = self.accel.on_clock.shape
             raise ValueError(f"accel has shape {shape} for a clock of {self.t.size} ticks")

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Literal
@@ -11,6 +12,7 @@ from typing import Literal
 import numpy as np
 
 from altfuse.fuse.smoother.compiled import compiled
+from altfuse.metrics import MAD_TO_SIGMA
 from altfuse.model import FloatArray, Samples
 
 #: Accelerometer bias random walk [m^2/s^5].
@@ -23,6 +25,10 @@ DRIFT_PRIOR = 0.01
 Q_DRIFT = 1e-5
 #: How well "standing still at the take-off point" holds on the ground [m, m/s].
 STILL_SIGMA = 0.02
+#: Prior on a sensor's offset from the datum [m], where the flight says nothing better; and the
+#: fewest samples on the ground that say better.
+OFFSET_PRIOR = 1.0
+MIN_DATUM_SAMPLES = 3
 
 
 @dataclass(frozen=True)
@@ -38,6 +44,26 @@ class Regressor:
     sensor: int
     coef: FloatArray  # per event; read at the sensor's own samples only
     prior: float
+
+
+def datum_priors(
+    samples: Sequence[Samples], windows: Sequence[tuple[float, float] | None]
+) -> FloatArray:
+    """Each offset's prior sigma [m] for a flight with no span known to stand still (a log that
+    starts moments before take-off): where a sensor's offset was measured standing at the
+    take-off point (``windows``, :attr:`altfuse.datum.Referred.datum_windows`), the standard
+    error of that measurement (its samples' robust spread there over the root of their count)
+    with STILL_SIGMA, how well standing there holds; OFFSET_PRIOR elsewhere."""
+    out = np.full(len(samples), OFFSET_PRIOR)
+    for i, (s, window) in enumerate(zip(samples, windows, strict=True)):
+        if window is None:
+            continue
+        there = s.value[(s.t >= window[0]) & (s.t <= window[1])]
+        if there.size < MIN_DATUM_SAMPLES:
+            continue
+        spread = MAD_TO_SIGMA * float(np.median(np.abs(there - np.median(there))))
+        out[i] = math.hypot(spread / math.sqrt(there.size), STILL_SIGMA)
+    return out
 
 
 def thermal_regressors(
@@ -71,6 +97,7 @@ class Layout:
     sign: FloatArray  # +1: the sensor measures h + c_i; -1: h - c_i (a rangefinder)
     regressors: tuple[Regressor, ...]
     drifting: tuple[int, ...] = ()  # the sensors whose offset has a drift rate
+    offset_prior: FloatArray | None = None  # each offset's prior sigma [m]; None: OFFSET_PRIOR
 
     @property
     def n(self) -> int:
@@ -200,15 +227,17 @@ def hold_still(x: FloatArray, p: FloatArray) -> None:
 
 def prior(ev: Events, layout: Layout) -> tuple[FloatArray, FloatArray]:
     """The state and covariance before the first event: ``h`` at the first height guess, every
-    other state at 0; a loose height, velocity and offsets, the regressors' priors and the drift
-    rates'."""
+    other state at 0; a loose height and velocity, the offsets' priors (``layout``'s), the
+    regressors' and the drift rates'."""
     m = layout.sign.size
     x = np.zeros(layout.n)
     x[0] = ev.h0
     # without the accelerometer the bias is inert: a tiny fixed variance keeps P invertible
     p = np.diag(
         [10.0**2, 3.0**2, 0.1**2 if ev.use_bias else 1e-9]
-        + [1.0**2] * m
+        + list(
+            (np.full(m, OFFSET_PRIOR) if layout.offset_prior is None else layout.offset_prior) ** 2
+        )
         + [r.prior**2 for r in layout.regressors]
         + [DRIFT_PRIOR**2] * len(layout.drifting)
     )
