@@ -91,6 +91,8 @@ class FusionInput:
             object.__setattr__(self, "temperatures", (None,) * n)
         if not self.datum_windows:
             object.__setattr__(self, "datum_windows", (None,) * n)
+        if len(self.datum_windows) != n:
+            raise ValueError(f"{len(self.datum_windows)} datum windows for {n} sensors")
         if self.accel is not None and self.accel.on_clock.shape != self.t.shape:
             shape = self.accel.on_clock.shape
             raise ValueError(f"accel has shape {shape} for a clock of {self.t.size} ticks")
