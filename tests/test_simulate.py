@@ -126,6 +126,25 @@ def test_faults(fault: str, tmp_path: Path) -> None:
         off = np.rad2deg(faulty.attitude.roll - clean.attitude.roll)
         assert np.sum(np.isclose(off, 30.0, atol=1e-3)) == 100
         assert np.sum(np.abs(off) > 1e-3) == 100
+    elif fault == "imu-clip":  # five samples pinned at -16 g on Z
+        assert faulty.imu is not None
+        pinned = np.isclose(faulty.imu.acc[:, 2], -16 * 9.80665, rtol=1e-4)
+        assert pinned.sum() == 5
+        assert np.ptp(np.flatnonzero(pinned)) == 4
+    elif fault == "imu-25hz":
+        assert clean.imu is not None
+        assert faulty.imu is not None
+        assert np.median(np.diff(faulty.imu.t)) == pytest.approx(0.04, rel=1e-3)
+        assert faulty.imu.t.size == pytest.approx(clean.imu.t.size / 2, abs=1)
+    elif fault == "baro-scale":  # 7 % of the height above take-off
+        extra = b["baro"].value - a["baro"].value
+        height = a["baro"].value - a["baro"].value[0]
+        assert np.corrcoef(extra, height)[0, 1] > 0.99
+    elif fault == "rangefinder-low":  # OutOfRangeLow on the ground, in range in flight
+        assert b["rangefinder"].dropped["Stat != 4 (not Good)"] > a["rangefinder"].dropped.get(
+            "Stat != 4 (not Good)", 0
+        )
+        assert b["rangefinder"].value.size > 0
     else:  # baro-drift: 0.05 m/s from 40 % of the flight
         assert (b["baro"].value - a["baro"].value)[-1] == pytest.approx(0.05 * 72, abs=0.1)
 

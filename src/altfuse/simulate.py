@@ -19,9 +19,13 @@ barometer departing, then every sensor scattering), ``hover`` (Paper B's hover a
 added to any: ``baro-drift``, ``gps-glitch``, ``rangefinder-dropout``, ``lose-gps``,
 ``lose-baro``, ``lose-rangefinder``, and two the real logs showed the accelerometer do:
 ``imu-impact`` (one IMU sample of 25 g, an impact or a clipped sample: 5 m/s of velocity in one
-50 Hz sample) and ``attitude-error`` (the logged roll 30 degrees off for 10 s: gravity rotated
+50 Hz sample), ``attitude-error`` (the logged roll 30 degrees off for 10 s: gravity rotated
 into the vertical, 1.3 m/s^2 of false acceleration, as a plane's attitude error at large bank
-angles).
+angles), ``imu-clip`` (a shock: five consecutive IMU samples pinned at the 16 g range, 15 m/s of
+false velocity, too long for a median of its neighbours to call a spike), ``imu-25hz`` (the IMU
+logged at 25 Hz, as older and busier logs do); and two of the other sensors:
+``baro-scale`` (the barometer 7 % high over the flight: a warm sensor) and ``rangefinder-low``
+(mounted 0.1 m up, below its 0.2 m minimum: OutOfRangeLow on the ground).
 """
 
 from __future__ import annotations
@@ -219,7 +223,18 @@ FAULTS = (
     "lose-rangefinder",
     "imu-impact",
     "attitude-error",
+    "imu-clip",
+    "imu-25hz",
+    "baro-scale",
+    "rangefinder-low",
 )
+#: The accelerometer's range [m/s^2]: ArduPilot's IMUs clip at 16 g.
+IMU_CLIP_M_S2 = 16.0 * G
+#: A barometer's scale error with ``baro-scale``: 7 % high, as the simulators' climbs show.
+BARO_SCALE = 1.07
+#: The rangefinder's mount height with ``rangefinder-low``: below its minimum range, so that
+#: on the ground it reads OutOfRangeLow.
+RANGEFINDER_LOW_MOUNT_M = 0.1
 
 
 @dataclass(frozen=True)
@@ -313,7 +328,8 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     # barometer: 20 Hz, thermal drift, scenario error, noise
     ts = keep("baro", at(20.0))
     temp = 25.0 + 10.0 * (1 - np.exp(-ts / 60.0))
-    alt = truth(ts, p.height_m) + 0.12 * (temp - 25.0) + truth(ts, p.baro_error_m)
+    scale = BARO_SCALE if "baro-scale" in faults else 1.0
+    alt = scale * truth(ts, p.height_m) + 0.12 * (temp - 25.0) + truth(ts, p.baro_error_m)
     alt = alt + truth(ts, p.baro_sigma_m) * rng.normal(0.0, 1.0, ts.size)
     if "baro-drift" in faults:
         alt = alt + 0.05 * np.clip(ts - 0.4 * duration, 0.0, None)
@@ -323,7 +339,8 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     ts = keep("rangefinder", at(20.0))
     ground = p.terrain(truth(ts, p.distance_m))
     tilt = np.cos(truth(ts, p.roll)) * np.cos(truth(ts, p.pitch))
-    dist = (truth(ts, p.height_m) - ground + RANGEFINDER_MOUNT_M) / tilt
+    mount = RANGEFINDER_LOW_MOUNT_M if "rangefinder-low" in faults else RANGEFINDER_MOUNT_M
+    dist = (truth(ts, p.height_m) - ground + mount) / tilt
     dist = dist + truth(ts, p.rangefinder_sigma_m) * rng.normal(0.0, 1.0, ts.size)
     stat = np.where(dist > p.rangefinder_max_m, 3, np.where(dist < RANGEFINDER_MIN_M, 2, 4))
     dist = np.clip(dist, RANGEFINDER_MIN_M, p.rangefinder_max_m)
@@ -334,8 +351,8 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     # logged as newer ArduPilot does: centimetres in an int16, multiplier B (0.01) in FMTU
     log("RFND", ts, 0, np.round(100 * dist), stat, 25)
 
-    # IMU: 50 Hz specific force in FRD, with bias and noise
-    ts = at(50.0)
+    # IMU: 50 Hz (or 25) specific force in FRD, with bias and noise
+    ts = at(25.0 if "imu-25hz" in faults else 50.0)
     r, pitch = truth(ts, p.roll), truth(ts, p.pitch)
     acc_up = np.gradient(np.gradient(p.height_m, DT_S), DT_S)
     f_down = -(G + truth(ts, acc_up))
@@ -350,6 +367,9 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     f_body = f_body + rng.normal(0.0, 0.15, (3, ts.size)) + np.array([[0.0], [0.0], [0.05]])
     if "imu-impact" in faults:  # up is -Z in FRD
         f_body[2, np.searchsorted(ts, 0.45 * duration)] -= 25.0 * G
+    if "imu-clip" in faults:  # a shock up, five samples pinned at the sensor's range
+        first = np.searchsorted(ts, 0.65 * duration)
+        f_body[2, first : first + 5] = -IMU_CLIP_M_S2
     log("IMU", ts, 0, *f_body)
 
     ts = at(10.0)
