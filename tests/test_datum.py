@@ -176,6 +176,36 @@ def test_a_rangefinder_without_ground_readings_takes_its_ground_clearance() -> N
     np.testing.assert_allclose(ref.h[:, 2][np.isfinite(ref.h[:, 2])], h[250:], atol=0.1)
 
 
+def censored_flight() -> tuple[Aligned, np.ndarray]:
+    """:func:`flight` with the rangefinder mounted 0.1 m up under a 0.2 m minimum: on the ground
+    only the noise's tail above its minimum is valid, a few scattered readings, biased high."""
+    aligned, h = flight()
+    rng = np.random.default_rng(2)
+    reading = 0.1 + h + rng.normal(0, 0.08, h.size)
+    z = aligned.z.copy()
+    z[:, 2] = np.where(reading >= 0.2, reading, np.nan)
+    return Aligned(aligned.t, aligned.names, aligned.kinds, z, 10.0, 1.0, "union", {}), h
+
+
+def test_a_rangefinder_below_its_minimum_on_the_ground_is_not_referred_on_its_tail() -> None:
+    aligned, _ = censored_flight()
+    ground = refer_to_takeoff(aligned, ground_window_s=5.0)
+    window = (aligned.t >= ground.ground_window_s[0]) & (aligned.t <= ground.ground_window_s[1])
+    tail = aligned.z[window, 2]
+    assert 0.0 < np.isfinite(tail).mean() < 0.5
+    assert np.nanmedian(tail) > 0.2  # what a median over the ground window would have taken
+    with_clearance = refer_to_takeoff(aligned, ground_window_s=5.0, clearances={"rangefinder": 0.1})
+    offset = {o.name: o for o in with_clearance.offsets}["rangefinder"]
+    assert offset.offset_m == 0.1
+    assert "below its minimum there" in offset.method
+    # without a clearance: matched to the barometer after take-off, not on the ground's tail
+    offset = {o.name: o for o in ground.offsets}["rangefinder"]
+    assert "median difference from baro" in offset.method
+    assert offset.window_s is not None
+    assert offset.window_s[0] > ground.takeoff_s
+    assert offset.offset_m == pytest.approx(0.1, abs=0.05)
+
+
 def two_flights(second_takes_off: bool) -> tuple[Aligned, np.ndarray]:
     """Two 80 s flights from the same ground, 30 s apart with nothing logged between (a
     reboot): the barometer recalibrates to 0 on the second boot, 3 m below its first zero; the

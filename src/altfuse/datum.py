@@ -49,6 +49,10 @@ from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Samples, SensorKin
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
 MIN_WINDOW_TICKS = 3
+#: A rangefinder valid on less of the ground window than this reads below its minimum range
+#: there: its valid readings are the noise's tail above the minimum, biased high (a mount 0.1 m
+#: up under a 0.2 m minimum gave an offset of 0.29 m), and its datum is found as without any.
+RANGEFINDER_GROUND_SHARE = 0.5
 #: The ground window ends this long before the detected take-off [s].
 TAKEOFF_MARGIN_S = 1.0
 #: The vehicle is taken to stand still until this long before the detected take-off [s]: a gentle
@@ -122,6 +126,7 @@ class _Ground:
     ref: int
     clearances: Mapping[str, float]
     real: bool  # before a detected take-off, not the log's first seconds
+    takeoff_s: float | None = None  # the detected take-off, where the window is before it
 
 
 @dataclass(frozen=True)
@@ -341,7 +346,9 @@ def _refer_segment(
     win_idx = np.flatnonzero(window & ref_valid)
     ground_window = (float(t[win_idx[0]]), float(t[win_idx[-1]]))
 
-    ground = _Ground(window, ground_how, ground_s, ref, dict(clearances or {}), real)
+    ground = _Ground(
+        window, ground_how, ground_s, ref, dict(clearances or {}), real, takeoff if real else None
+    )
     offsets, h, dropped = _refer(aligned, ground, {})
     if referral == "full":
         scales = baro_scales(aligned, h, offsets)
@@ -380,12 +387,20 @@ def _refer(
         name, valid = aligned.names[i], np.isfinite(z[:, i])
         scale = scales[i].scale if i in scales and scales[i].applied else 1.0
         on_ground = ground.window & valid
+        why = "no valid reading on the ground"
+        if aligned.kinds[i] == "rangefinder" and on_ground.any() and i != ref:
+            share = on_ground.sum() / max(int(ground.window.sum()), 1)
+            if share < RANGEFINDER_GROUND_SHARE:  # the tail of readings below its minimum
+                on_ground = np.zeros_like(on_ground)
+                why = f"valid on {share:.0%} of the ground window: below its minimum there"
+                if ground.takeoff_s is not None:  # matched in flight, not on that tail
+                    valid = valid & (t > ground.takeoff_s)
         if on_ground.sum() >= MIN_WINDOW_TICKS or (i == ref and on_ground.any()):
             sel, base, how = on_ground, np.zeros_like(t), f"median over the {ground.how}"
             measured = True
         elif name in ground.clearances and ground.real:
             clearance = ground.clearances[name]
-            how = f"its ground clearance, {clearance:.2f} m (no valid reading on the ground)"
+            how = f"its ground clearance, {clearance:.2f} m ({why})"
             offsets[i] = Offset(name, clearance, how, None, 0)
             h[:, i] = z[:, i] - clearance
             continue
@@ -398,7 +413,7 @@ def _refer(
                 )
                 continue
             base = h[:, ref]
-            how = f"median difference from {aligned.names[ref]} (no samples on the ground)"
+            how = f"median difference from {aligned.names[ref]} ({why})"
             measured = False
         offset = float(np.median(z[sel, i] - scale * base[sel]))
         sel_t = t[sel]
