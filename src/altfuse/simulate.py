@@ -9,7 +9,8 @@ sensor is when; shared sensor models turn it into the records an ArduPilot log h
   board warms from 25 °C towards 35 °C with a 60 s time constant, 0.12 m per °C.
 - Rangefinder, 20 Hz, distance along the body's down axis to the ground, 0.25 m mount height;
   ``Stat`` 4 (Good) within range, 2 (OutOfRangeLow) below 0.2 m with ``Dist`` at 0.2 m, 3
-  (OutOfRangeHigh) above its maximum with ``Dist`` pinned at the maximum, as many drivers log.
+  (OutOfRangeHigh) above its maximum with ``Dist`` pinned at the maximum, as many drivers log;
+  its ``RNGFND1_MIN_CM``, ``_MAX_CM`` and ``_GNDCLEAR`` (the mount height) in ``PARM`` records.
 - IMU, 50 Hz, specific force in FRD with a 0.05 m/s² bias on Z and 0.15 m/s² noise; ATT, 10 Hz.
 - SIM, 10 Hz: the true altitude AMSL, as ArduPilot's simulator logs it.
 
@@ -350,6 +351,15 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         stat, dist = np.where(out, 1, stat), np.where(out, 0.0, dist)  # 1 = NoData
     # logged as newer ArduPilot does: centimetres in an int16, multiplier B (0.01) in FMTU
     log("RFND", ts, 0, np.round(100 * dist), stat, 25)
+    # and configured as ArduPilot logs it at boot: range limits, and what it reads when landed
+    limits = {
+        "RNGFND1_MIN_CM": 100 * RANGEFINDER_MIN_M,
+        "RNGFND1_MAX_CM": 100 * p.rangefinder_max_m,
+    }
+    records["PARM"] = [
+        (0.0, (key, round(value)))
+        for key, value in {**limits, "RNGFND1_GNDCLEAR": 100 * mount}.items()
+    ]
 
     # IMU: 50 Hz (or 25) specific force in FRD, with bias and noise
     ts = at(25.0 if "imu-25hz" in faults else 50.0)
@@ -396,6 +406,7 @@ _TYPES = {
     "ATT": ("Qfff", "TimeUS,Roll,Pitch,Yaw", "sddh", "F000"),
     "SIM": ("Qf", "TimeUS,Alt", "sm", "F0"),
     "MSG": ("QZ", "TimeUS,Message", "s-", "F-"),
+    "PARM": ("QNf", "TimeUS,Name,Value", "s--", "F--"),
 }
 
 
