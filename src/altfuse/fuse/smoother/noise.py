@@ -177,20 +177,29 @@ def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) 
     return np.asarray(np.maximum(MAD_TO_SIGMA * med / math.sqrt(6.0), _MIN_SIGMA_M))
 
 
-def terrain_noise(d: FloatArray, flown: FloatArray, lag: int) -> float:
+def terrain_noise(d: FloatArray, flown: FloatArray, lag: int, noise_m2: float) -> float:
     """Ground-height random walk per metre flown [m^2/m], by method of moments; NaN if unknown.
 
     ``d`` is another sensor minus a rangefinder on the clock (the ground height plus both
     sensors' errors), ``flown`` the distance flown [m] on the clock. Over ``lag`` ticks the
     squared change of ``d`` is ``q dx + const`` (``const``: the noise, and drift too slow to
-    matter over the lag): regressed on the distance ``dx`` flown meanwhile.
+    matter over the lag): regressed on the distance ``dx`` flown meanwhile. Where the
+    rangefinder never reads while the vehicle is (nearly) still (below its minimum on the
+    ground, then flown fast) ``const`` is taken as ``noise_m2``, the two sensors' white noise
+    over the change (twice the sum of their variances), and only ``q`` is fitted.
     """
     if d.size <= lag:
         return math.nan
     dd, dx = d[lag:] - d[:-lag], flown[lag:] - flown[:-lag]
     ok = np.isfinite(dd) & np.isfinite(dx)
-    if (ok & (dx > 1.0)).sum() < 10 or (ok & (dx <= 1.0)).sum() < 10:
+    moving = ok & (dx > 1.0)
+    if moving.sum() < 10:
         return math.nan
+    if (ok & (dx <= 1.0)).sum() < 10:
+        slope = float(
+            np.dot(dx[moving], dd[moving] ** 2 - noise_m2) / np.dot(dx[moving], dx[moving])
+        )
+        return max(slope, 0.0)
     design = np.column_stack([dx[ok], np.ones(ok.sum())])
     slope = float(np.linalg.lstsq(design, dd[ok] ** 2, rcond=None)[0][0])
     return max(slope, 0.0)
@@ -273,7 +282,8 @@ def state_noise(
         q_m = math.nan
         if others:
             j = min(others, key=lambda j: noise[j])
-            q_m = terrain_noise(z[:, j] - z[:, i], flown, max(1, round(1.0 / dt)))
+            lag = max(1, round(1.0 / dt))
+            q_m = terrain_noise(z[:, j] - z[:, i], flown, lag, 2 * (noise[j] ** 2 + noise[i] ** 2))
         q_m = Q_TERRAIN_PER_M if not math.isfinite(q_m) else min(q_m, Q_TERRAIN_MAX)
         terrain[names[i]] = q_m
         moving = q_m * speed_events + Q_GROUND_STILL
