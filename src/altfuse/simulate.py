@@ -16,7 +16,8 @@ sensor is when; shared sensor models turn it into the records an ArduPilot log h
 
 Scenarios (``SCENARIOS``): ``paper-a`` (Paper A's experiment: level flight near 15 m, the
 barometer departing, then every sensor scattering), ``hover`` (Paper B's hover at 240 m),
-``mission`` (take-off, climb, cruise over uneven ground, landing). Faults (``FAULTS``) can be
+``mission`` (take-off, climb, cruise over uneven ground, landing), ``climb`` (a plane's: a
+climb to 300 m at up to 18 m/s, banked turns, a descent). Faults (``FAULTS``) can be
 added to any: ``baro-drift``, ``gps-glitch``, ``rangefinder-dropout``, ``lose-gps``,
 ``lose-baro``, ``lose-rangefinder``, and two the real logs showed the accelerometer do:
 ``imu-impact`` (one IMU sample of 25 g, an impact or a clipped sample: 5 m/s of velocity in one
@@ -199,6 +200,39 @@ def hover(t: FloatArray, duration_s: float) -> Profile:
     )
 
 
+def climb(t: FloatArray, duration_s: float) -> Profile:
+    """A plane's flight as the simulators' climb logs show it: a take-off run, a climb to 300 m
+    at up to 18 m/s (the GPS's lag is metres here), a cruise in banked turns with 20 m
+    altitude changes, a descent and a landing where it took off."""
+    ground, climb_s = 10.0, 25.0
+    land = duration_s - ground - climb_s - 10.0
+    up = _smoothstep((t - ground) / climb_s) * (1 - _smoothstep((t - land) / (climb_s + 10.0)))
+    cruising = _smoothstep((t - ground - climb_s) / 5.0) * (1 - _smoothstep((t - land) / 5.0))
+    h = 300.0 * up + 20.0 * np.sin(2 * np.pi * (t - ground - climb_s) / 40.0) * cruising
+    flying = _airborne(t, ground, land + climb_s + 10.0)
+    rate = np.gradient(h, DT_S)
+    ones = np.ones_like(t)
+    return Profile(
+        t=t,
+        height_m=h,
+        distance_m=np.cumsum(20.0 * flying) * DT_S,
+        roll=np.deg2rad(30.0) * np.sin(2 * np.pi * t / 30.0) * (up > 0.5),
+        pitch=np.arctan2(rate, 20.0) * flying,
+        gps_sigma_m=0.35 * ones,
+        baro_sigma_m=0.1 * ones,
+        baro_error_m=0.0 * ones,
+        rangefinder_sigma_m=0.03 * ones,
+        rangefinder_max_m=40.0,
+        terrain=_flat,
+        segments={
+            "ground": (0.0, ground),
+            "climb": (ground, ground + climb_s),
+            "cruise": (ground + climb_s, land),
+            "landing": (land, duration_s),
+        },
+    )
+
+
 @dataclass(frozen=True)
 class Scenario:
     name: str
@@ -213,6 +247,7 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario("paper-a", paper_a, 75.0, 75.0),
         Scenario("hover", hover, 180.0, 120.0),
         Scenario("mission", mission, 120.0, 60.0),
+        Scenario("climb", climb, 150.0, 120.0),
     )
 }
 FAULTS = (
