@@ -387,14 +387,12 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     # logged as newer ArduPilot does: centimetres in an int16, multiplier B (0.01) in FMTU
     log("RFND", ts, 0, np.round(100 * dist), stat, 25)
     # and configured as ArduPilot logs it at boot: range limits, and what it reads when landed
-    limits = {
+    params = {
         "RNGFND1_MIN_CM": 100 * RANGEFINDER_MIN_M,
         "RNGFND1_MAX_CM": 100 * p.rangefinder_max_m,
+        "RNGFND1_GNDCLEAR": 100 * mount,
     }
-    records["PARM"] = [
-        (0.0, (key, round(value)))
-        for key, value in {**limits, "RNGFND1_GNDCLEAR": 100 * mount}.items()
-    ]
+    records["PARM"] = [(0.0, (key, round(value))) for key, value in params.items()]
 
     # IMU: 50 Hz (or 25) specific force in FRD, with bias and noise
     ts = at(25.0 if "imu-25hz" in faults else 50.0)
