@@ -28,7 +28,8 @@ from altfuse.fuse.smoother.model import (
 )
 from altfuse.model import FloatArray
 
-#: Longest time [s] every sensor's samples may be rejected before the estimate is let loose.
+#: Longest time [s] every sensor's samples may be rejected before the estimate is let loose,
+#: and a rangefinder's alone before its ground height is.
 LOCKOUT_S = 2.0
 
 
@@ -45,7 +46,7 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
         _measured(ev, r, layout), dynamics, ev.still.astype(np.bool_), ev.gate, (x0, p0), True
     )
     if smooth:
-        _backward(ev.t, (xp, xf, pf, released), dynamics)
+        _backward(ev.t, (xp, xf, pf, released, ev.who.astype(np.int64)), dynamics)
     return {
         "x": xf, "p": pf, "gain_h": gain_h, "accepted": accepted, "loglik": loglik, "nu": nu
     }  # fmt: skip
@@ -93,7 +94,8 @@ def _forward(
     FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray, FloatArray, FloatArray
 ]:
     """The forward filter: each event's prior state, posterior state and covariance, what the
-    lockout release added to the prior's (h, v) variances there, each sample's gain on h,
+    lockout release added to the prior's (h, v) variances there (and to the sample's sensor
+    state, where a rangefinder's ground height was let loose), each sample's gain on h,
     whether it passed the gate, its log-likelihood and its normalised innovation
     ``y / sqrt(S)``. The priors' covariances are not kept (a flight's worth is hundreds of
     megabytes): :func:`_backward` makes them again.
@@ -110,7 +112,9 @@ def _forward(
     count, n = h.shape
     kept = count if keep else 1
     xp = np.zeros((kept, n))
-    released = np.zeros((count, 2))
+    released = np.zeros((count, 3))  # added to the prior's h, v and the sample's sensor state
+    sensor_accepted = np.full(n, np.nan)  # per state: its sensor's last accepted sample [s]
+    sensor_r = np.full(n, np.inf)  # ... and that sample's variance
     xf = np.zeros((kept, n))
     pf = np.zeros((kept, n, n))
     gain_h = np.zeros(count)
@@ -134,13 +138,10 @@ def _forward(
         i = who[k]
         if i >= 0:
             y, s = innovation(x, p, z[k], h[k], r[k], ph)
-            if t[k] - last_accepted > LOCKOUT_S and y * y > gate * gate * s:
-                # no sample of any sensor passed the gate for LOCKOUT_S: the estimate, not
-                # every sensor, has gone astray (ArduPilot's EKF3 resets its height after
-                # 5 s); its height and velocity become as uncertain as this sample says
-                released[k] = y * y, (y / LOCKOUT_S) ** 2
-                p[0, 0] += released[k, 0]
-                p[1, 1] += released[k, 1]
+            if math.isnan(sensor_accepted[3 + i]):
+                sensor_accepted[3 + i] = t[k]
+            seen = (t[k], r[k], h[k, 3 + i], last_accepted, sensor_accepted, sensor_r)
+            if y * y > gate * gate * s and _release(k, 3 + i, y * y, seen, p, released):
                 y, s = innovation(x, p, z[k], h[k], r[k], ph)
             nu[k] = y / math.sqrt(s)
         xp[k if keep else 0] = x
@@ -148,7 +149,8 @@ def _forward(
         if i >= 0 and y * y <= gate * gate * s:
             gain_h[k] = abs(update(x, p, y, s, ph))
             accepted[k] = True
-            last_accepted = t[k]
+            last_accepted = sensor_accepted[3 + i] = t[k]
+            sensor_r[3 + i] = r[k]
             # log N(y; 0, S)
             loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
         if still[k]:
@@ -158,15 +160,52 @@ def _forward(
 
 
 @compiled
+def _release(
+    k: int,
+    c: int,
+    y2: float,
+    seen: tuple[float, float, float, float, FloatArray, FloatArray],
+    p: FloatArray,
+    released: FloatArray,
+) -> bool:
+    """Sample ``k`` of the sensor with state ``c`` fails the gate by the squared innovation
+    ``y2``: let loose what has gone astray, in place on ``p`` and ``released[k]``, and say
+    whether anything was. ``seen``: the sample's time and variance, its row of H at ``c``, the
+    last accepted sample's time, and per state its sensor's last accepted sample [s] and
+    that one's variance."""
+    now, r, sign, last_accepted, sensor_accepted, sensor_r = seen
+    if now - last_accepted > LOCKOUT_S:
+        # no sample of any sensor passed the gate for LOCKOUT_S: the estimate, not every
+        # sensor, has gone astray (ArduPilot's EKF3 resets its height after 5 s); its height
+        # and velocity become as uncertain as this sample says
+        released[k, 0], released[k, 1] = y2, y2 / LOCKOUT_S**2
+        p[0, 0] += released[k, 0]
+        p[1, 1] += released[k, 1]
+        return True
+    if sign < 0.0 and now - sensor_accepted[c] > LOCKOUT_S:
+        # a rangefinder alone has failed the gate for LOCKOUT_S while a sensor at least as
+        # precise passed (the estimate holds): the ground under it has stepped (an edge, a
+        # roof); its ground height, not h, becomes as uncertain as this sample says. Where
+        # only less precise sensors held the estimate, a rangefinder back from a dropout
+        # followed the estimate's drift instead of correcting it (Paper A: 0.138 -> 0.170 m).
+        for j in range(3, sensor_r.size):
+            if j != c and now - sensor_accepted[j] <= LOCKOUT_S and sensor_r[j] <= r:
+                released[k, 2] = y2
+                p[c, c] += y2
+                return True
+    return False
+
+
+@compiled
 def _backward(
     t: FloatArray,
-    filtered: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+    filtered: tuple[FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray],
     dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool],
 ) -> None:
     """The Rauch-Tung-Striebel pass (:func:`.kalman.rts_step`) back over the filtered events, in
     place: the filtered states and covariances become the smoothed ones. Each prior covariance
     is made again from the filtered one before it, as :func:`_forward` made it."""
-    xp, xs, ps, released = filtered
+    xp, xs, ps, released, who = filtered
     _, q_accel, q_state, drifts, use_bias = dynamics
     n = xs.shape[1]
     f, q, pp = np.eye(n), np.zeros((n, n)), np.zeros((n, n))
@@ -180,4 +219,6 @@ def _backward(
             predict_covariance(pp, f, q, work)
         pp[0, 0] += released[k + 1, 0]
         pp[1, 1] += released[k + 1, 1]
+        if released[k + 1, 2] > 0.0:
+            pp[3 + who[k + 1], 3 + who[k + 1]] += released[k + 1, 2]
         rts_step((xs[k], ps[k]), (xp[k + 1], pp), (xs[k + 1], ps[k + 1]), f, work)
