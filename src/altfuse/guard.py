@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from altfuse.fuse.base import DIVERGED, FusionInput, FusionResult
-from altfuse.metrics import white_noise_sigma
+from altfuse.metrics import envelope, white_noise_sigma
 from altfuse.model import FloatArray
 
 #: An excursion below this [m] is never a divergence, however quiet the sensors.
@@ -43,8 +43,7 @@ def excursion(fused: FloatArray, z: FloatArray) -> FloatArray:
     """How far [m] ``fused`` lies outside the envelope of the valid sensors ``z`` (T, n); NaN
     where no sensor is valid."""
     valid = np.isfinite(z).any(axis=1)
-    lo = np.min(np.where(np.isfinite(z), z, np.inf), axis=1)
-    hi = np.max(np.where(np.isfinite(z), z, -np.inf), axis=1)
+    lo, hi = envelope(z)
     out = np.maximum(np.maximum(lo - fused, fused - hi), 0.0)
     return np.where(valid & np.isfinite(fused), out, np.nan)
 

@@ -15,6 +15,15 @@ from altfuse.model import FloatArray
 MAD_TO_SIGMA = 1.0 / 0.6744897501960817
 
 
+def envelope(z: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Per tick, the lowest and the highest valid source of ``z`` (T, n): inf and -inf where
+    none is valid."""
+    valid = np.isfinite(z)
+    lo = np.min(np.where(valid, z, np.inf), axis=1, initial=np.inf)
+    hi = np.max(np.where(valid, z, -np.inf), axis=1, initial=-np.inf)
+    return lo, hi
+
+
 def mad_sigma(x: FloatArray) -> float:
     """The standard deviation of normal ``x`` from its median absolute deviation."""
     return MAD_TO_SIGMA * float(np.median(np.abs(x - np.median(x))))

@@ -91,8 +91,26 @@ def _hills(x: FloatArray) -> FloatArray:
     return np.asarray(g)
 
 
+def _between(t: FloatArray, up_s: float, rise_s: float, down_s: float, fall_s: float) -> FloatArray:
+    """0 before ``up_s``, rising smoothly over ``rise_s`` to 1, falling over ``fall_s`` from
+    ``down_s`` back to 0."""
+    return np.asarray(_smoothstep((t - up_s) / rise_s) * (1 - _smoothstep((t - down_s) / fall_s)))
+
+
 def _airborne(t: FloatArray, up_s: float, down_s: float) -> FloatArray:
-    return np.asarray(_smoothstep((t - up_s) / 2.0) * (1 - _smoothstep((t - down_s) / 2.0)))
+    return _between(t, up_s, 2.0, down_s, 2.0)
+
+
+def _phases(
+    ground_s: float, cruise_s: float, land_s: float, end_s: float
+) -> dict[str, tuple[float, float]]:
+    """A flight's segments: on the ground, climbing, cruising, landing."""
+    return {
+        "ground": (0.0, ground_s),
+        "climb": (ground_s, cruise_s),
+        "cruise": (cruise_s, land_s),
+        "landing": (land_s, end_s),
+    }
 
 
 def _level_profile(
@@ -108,7 +126,7 @@ def mission(t: FloatArray, duration_s: float) -> Profile:
     landing where it took off."""
     ground, climb = 10.0, 15.0
     land = duration_s - ground - climb
-    up = _smoothstep((t - ground) / climb) * (1 - _smoothstep((t - land) / climb))
+    up = _between(t, ground, climb, land, climb)
     h = _level_profile(t, ground, climb, 15.0, land) + 1.5 * np.sin(2 * np.pi * t / 40.0) * up
     flying = _airborne(t, ground + climb / 2, land + climb / 2)
     flown = np.cumsum(flying)
@@ -126,12 +144,7 @@ def mission(t: FloatArray, duration_s: float) -> Profile:
         rangefinder_sigma_m=0.03 * ones,
         rangefinder_max_m=20.0,
         terrain=_hills,
-        segments={
-            "ground": (0.0, ground),
-            "climb": (ground, ground + climb),
-            "cruise": (ground + climb, land),
-            "landing": (land, duration_s),
-        },
+        segments=_phases(ground, ground + climb, land, duration_s),
     )
 
 
@@ -206,8 +219,8 @@ def climb(t: FloatArray, duration_s: float) -> Profile:
     altitude changes, a descent and a landing where it took off."""
     ground, climb_s = 10.0, 25.0
     land = duration_s - ground - climb_s - 10.0
-    up = _smoothstep((t - ground) / climb_s) * (1 - _smoothstep((t - land) / (climb_s + 10.0)))
-    cruising = _smoothstep((t - ground - climb_s) / 5.0) * (1 - _smoothstep((t - land) / 5.0))
+    up = _between(t, ground, climb_s, land, climb_s + 10.0)
+    cruising = _between(t, ground + climb_s, 5.0, land, 5.0)
     h = 300.0 * up + 20.0 * np.sin(2 * np.pi * (t - ground - climb_s) / 40.0) * cruising
     flying = _airborne(t, ground, land + climb_s + 10.0)
     rate = np.gradient(h, DT_S)
@@ -224,12 +237,7 @@ def climb(t: FloatArray, duration_s: float) -> Profile:
         rangefinder_sigma_m=0.03 * ones,
         rangefinder_max_m=40.0,
         terrain=_flat,
-        segments={
-            "ground": (0.0, ground),
-            "climb": (ground, ground + climb_s),
-            "cruise": (ground + climb_s, land),
-            "landing": (land, duration_s),
-        },
+        segments=_phases(ground, ground + climb_s, land, duration_s),
     )
 
 

@@ -56,6 +56,7 @@ import numpy as np
 
 from altfuse.fuse.base import INERTIAL, FusionInput, FusionResult
 from altfuse.fuse.delay import DelayParams, layer1, process_noise
+from altfuse.metrics import envelope
 from altfuse.model import FloatArray, SensorKind
 from altfuse.params import param
 
@@ -123,8 +124,7 @@ def witnesses(z: FloatArray, kinds: tuple[SensorKind, ...]) -> tuple[FloatArray,
     valid = np.isfinite(z)
     seen = [valid[:, [k == kind for k in kinds]].any(axis=1) for kind in sorted(set(kinds))]
     two = np.sum(seen, axis=0) >= 2 if seen else np.zeros(z.shape[0], bool)
-    lo = np.min(np.where(valid, z, np.inf), axis=1, initial=np.inf)
-    hi = np.max(np.where(valid, z, -np.inf), axis=1, initial=-np.inf)
+    lo, hi = envelope(z)
     return np.where(two, lo, np.nan), np.where(two, hi, np.nan)
 
 

@@ -12,7 +12,7 @@ from typing import Literal
 import numpy as np
 
 from altfuse.fuse.smoother.compiled import compiled
-from altfuse.metrics import MAD_TO_SIGMA
+from altfuse.metrics import mad_sigma
 from altfuse.model import FloatArray, Samples
 
 #: Accelerometer bias random walk [m^2/s^5].
@@ -61,8 +61,7 @@ def datum_priors(
         there = s.value[(s.t >= window[0]) & (s.t <= window[1])]
         if there.size < MIN_DATUM_SAMPLES:
             continue
-        spread = MAD_TO_SIGMA * float(np.median(np.abs(there - np.median(there))))
-        out[i] = math.hypot(spread / math.sqrt(there.size), STILL_SIGMA)
+        out[i] = math.hypot(mad_sigma(there) / math.sqrt(there.size), STILL_SIGMA)
     return out
 
 

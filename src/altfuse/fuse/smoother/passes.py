@@ -140,9 +140,10 @@ def _forward(
             y, s = innovation(x, p, z[k], h[k], r[k], ph)
             if math.isnan(sensor_accepted[3 + i]):
                 sensor_accepted[3 + i] = t[k]
-            seen = (t[k], r[k], h[k, 3 + i], last_accepted, sensor_accepted, sensor_r)
-            if y * y > gate * gate * s and _release(k, 3 + i, y * y, seen, p, released):
-                y, s = innovation(x, p, z[k], h[k], r[k], ph)
+            if y * y > gate * gate * s:  # shut: has the estimate, or a ground, gone astray?
+                seen = (t[k], r[k], h[k, 3 + i], last_accepted, sensor_accepted, sensor_r)
+                if _release(k, 3 + i, y * y, seen, p, released):
+                    y, s = innovation(x, p, z[k], h[k], r[k], ph)
             nu[k] = y / math.sqrt(s)
         xp[k if keep else 0] = x
         # the innovation gate: |y| <= gate sqrt(S)
