@@ -15,9 +15,14 @@ complete sets or nothing.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import fcntl
 import fnmatch
 import json
 import os
+import signal
+import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -32,9 +37,10 @@ from altfuse.io import sha256_of
 from altfuse.job import Outputs, fuse_to_files
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
-from altfuse.write import atomic_outputs
+from altfuse.write import Terminated, atomic_outputs, interruption, remove_stale_temporaries
 
 SUMMARY = "summary.csv"
+_PR_SET_PDEATHSIG = 1
 #: Exit code of a batch in which some logs failed (0: all ok; 1/2: the batch itself could not run).
 EXIT_PARTIAL = 4
 
@@ -129,21 +135,24 @@ def find_logs(paths: Sequence[str | Path], pattern: str = "*.bin") -> list[tuple
     return [(log, relative) for relative, log in sorted(found.items())]
 
 
-def remove_stale_temporaries(out_dir: Path) -> int:
-    """Delete the hidden ``.NAME.*.tmp`` files an interrupted run left behind; return the count."""
-    stale = [p for p in out_dir.rglob(".*.tmp") if p.is_file()] if out_dir.is_dir() else []
-    for path in stale:
-        path.unlink(missing_ok=True)
-    return len(stale)
-
-
 def plan(paths: Sequence[str | Path], out_dir: str | Path, pattern: str = "*.bin") -> list[Job]:
-    """The jobs of a batch: each log with its output stem under ``out_dir``."""
+    """The jobs of a batch: each log with its output stem under ``out_dir``. Two logs whose
+    stems differ only in case or extension (``flight.bin``, ``flight.BIN``) would write one set
+    of outputs (on a case-insensitive file system, or by suffix): refused, naming both."""
     out = Path(out_dir)
-    return [
-        Job(log, relative, out / relative.with_suffix(""))
-        for log, relative in find_logs(paths, pattern)
-    ]
+    jobs: list[Job] = []
+    taken: dict[str, Path] = {}
+    for log, relative in find_logs(paths, pattern):
+        stem = relative.with_suffix("")
+        key = str(stem).casefold()
+        if key in taken:
+            raise ParameterError(
+                f"{taken[key]} and {log} would write the same outputs ({out / stem}.*); "
+                "rename one, or give them separate batches"
+            )
+        taken[key] = log
+        jobs.append(Job(log, relative, out / stem))
+    return jobs
 
 
 def is_complete(job: Job, options: BatchOptions) -> bool:
@@ -157,7 +166,7 @@ def is_complete(job: Job, options: BatchOptions) -> bool:
         same_input = record["input"]["sha256"] == sha256_of(job.log)
         same_options = record.get("options") == asdict(options.fuse)
         listed = [meta.parent / p for p in record["outputs"].values()]
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):  # damaged: redo
         return False
     return same_input and same_options and all(p.exists() for p in listed)
 
@@ -165,7 +174,7 @@ def is_complete(job: Job, options: BatchOptions) -> bool:
 def process(job: Job, options: BatchOptions) -> LogResult:
     """Run one log and write its outputs; never raises for a bad log (its row says why)."""
     started = time.perf_counter()
-    name = str(job.relative)
+    name = printable(str(job.relative))
     if options.skip_existing and is_complete(job, options):
         return LogResult(name, "skipped", duration_s=time.perf_counter() - started)
     outputs = job.outputs(options)
@@ -202,8 +211,56 @@ def process(job: Job, options: BatchOptions) -> LogResult:
     except AltfuseError as exc:
         return LogResult(name, "failed", str(exc), time.perf_counter() - started)
     except Exception as exc:  # a bug must not stop the batch either; the row names it
+        signalled = interruption(exc)
+        if signalled is not None:  # a signal inside compiled code: still a signal
+            raise signalled from None
         message = f"internal error: {type(exc).__name__}: {exc}"
         return LogResult(name, "failed", message, time.perf_counter() - started)
+
+
+_EXIT_TERMINATED = 128 + signal.SIGTERM
+
+
+@dataclass
+class _WorkerState:
+    """What a worker process's SIGTERM handler needs to know."""
+
+    running: bool = False  # a log is being processed
+    terminating: bool = False  # SIGTERM came (its exception can be lost in a C callback)
+
+
+_worker = _WorkerState()
+
+
+def _worker_signal(_signum: int, _frame: object) -> None:
+    _worker.terminating = True
+    if _worker.running:
+        raise Terminated  # out through atomic_outputs, which removes its temporary files
+    os._exit(_EXIT_TERMINATED)
+
+
+def _worker_start(parent: int) -> None:
+    """In each worker process: SIGTERM ends it, removing the temporary files of the log in
+    hand, and on Linux the worker is sent SIGTERM when its parent dies (``PR_SET_PDEATHSIG``),
+    so that a killed batch does not leave workers writing on."""
+    signal.signal(signal.SIGTERM, _worker_signal)
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != parent:  # it died before the request above was made
+        os._exit(_EXIT_TERMINATED)
+
+
+def _process_in_worker(job: Job, options: BatchOptions) -> LogResult:
+    _worker.running = True
+    try:
+        return process(job, options)
+    except Terminated:
+        os._exit(_EXIT_TERMINATED)
+    finally:
+        _worker.running = False
+        if _worker.terminating:  # the signal's exception was swallowed (numba's cache callback)
+            os._exit(_EXIT_TERMINATED)
 
 
 def _local(jobs: list[Job], options: BatchOptions, workers: int) -> Iterator[LogResult]:
@@ -211,8 +268,10 @@ def _local(jobs: list[Job], options: BatchOptions, workers: int) -> Iterator[Log
         for job in jobs:
             yield process(job, options)
         return
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = [pool.submit(process, job, options) for job in jobs]
+    with ProcessPoolExecutor(
+        max_workers=workers, initializer=_worker_start, initargs=(os.getpid(),)
+    ) as pool:
+        futures = [pool.submit(_process_in_worker, job, options) for job in jobs]
         for future in as_completed(futures):
             yield future.result()
 
@@ -235,19 +294,74 @@ def _dask(jobs: list[Job], options: BatchOptions, scheduler: str) -> Iterator[Lo
             yield future.result()
 
 
-def write_summary(results: Iterable[LogResult], path: Path) -> None:
-    """``summary.csv``: one row per log, sorted by log, metrics as columns."""
+def printable(text: str) -> str:
+    """``text`` with the bytes of a non-UTF-8 file name (decoded by Python as surrogates) as
+    ``\\xNN`` escapes: any name can go into the summary and on the terminal."""
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
+def _previous_summary(path: Path) -> pd.DataFrame | None:
+    """The rows of an existing ``summary.csv``, to merge this run's into; None when there is
+    none. A file that is not a summary is refused: it is not altfuse's to replace."""
+    if not path.exists():
+        return None
+    try:
+        table = pd.read_csv(path, dtype={"log": str, "error": str, "sensors": str, "truth": str})
+    except (OSError, ValueError) as exc:
+        raise ParameterError(
+            f"{path} exists and cannot be read as a summary ({exc}); --force replaces it"
+        ) from exc
+    if not {"log", "status"} <= set(table.columns):
+        raise ParameterError(f"{path} exists and is not a batch summary; --force replaces it")
+    return table
+
+
+def write_summary(
+    results: Iterable[LogResult], path: Path, previous: pd.DataFrame | None = None
+) -> None:
+    """``summary.csv``: one row per log, sorted by log, metrics as columns. With ``previous``
+    (an earlier summary) its rows of logs not run now are kept, and a log skipped now keeps its
+    earlier row, status ``skipped``."""
     rows = []
-    for r in sorted(results, key=lambda r: r.log):
-        row: dict[str, Any] = {k: v for k, v in asdict(r).items() if k != "metrics"}
+    for r in results:
+        row: dict[str, Any] = {
+            k: printable(v) if isinstance(v, str) else v
+            for k, v in asdict(r).items()
+            if k != "metrics"
+        }
         row["duration_s"] = round(r.duration_s, 3)
         row.update(r.metrics)
         rows.append(row)
     columns = ["log", "status", "error", "duration_s", "sensors", "samples", "diverged", "truth"]
-    table = pd.DataFrame.from_records(rows)
+    table = pd.DataFrame.from_records(rows, columns=columns if not rows else None)
+    if previous is not None and not previous.empty:
+        earlier = previous.drop_duplicates("log", keep="last").set_index("log", drop=False)
+        skipped = table.loc[table["status"] == "skipped", "log"]
+        kept = earlier.loc[earlier.index.isin(skipped)].assign(status="skipped")
+        others = earlier.loc[~earlier.index.isin(table["log"])]
+        table = pd.concat([table[table["status"] != "skipped"], kept, others], ignore_index=True)
     table = table.reindex(columns=columns + [c for c in table.columns if c not in columns])
+    table = table.sort_values("log", kind="stable")
     with atomic_outputs() as stage:
         stage(path, lambda f: table.to_csv(f, index=False, float_format="%.6f"))
+
+
+@contextlib.contextmanager
+def _locked(out: Path) -> Iterator[None]:
+    """Hold a lock on the output folder itself (``flock`` on its descriptor: no lock file left
+    behind) for the batch, or refuse when another batch holds it."""
+    out.mkdir(parents=True, exist_ok=True)
+    fd = os.open(out, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError as exc:
+            raise ParameterError(
+                f"another altfuse batch is writing to {out}; wait for it, or choose another -o"
+            ) from exc
+        yield
+    finally:
+        os.close(fd)
 
 
 def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's options)
@@ -272,12 +386,14 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
     if not todo:
         raise LogReadError(f"no file matching {pattern!r} under {', '.join(map(str, paths))}")
     out = Path(out_dir)
-    remove_stale_temporaries(out)
-    results = []
-    stream = _dask(todo, options, scheduler) if scheduler else _local(todo, options, workers)
-    for result in stream:
-        results.append(result)
-        if on_result is not None:
-            on_result(result, len(todo))
-    write_summary(results, out / SUMMARY)
+    with _locked(out):
+        previous = None if options.force else _previous_summary(out / SUMMARY)
+        remove_stale_temporaries(out, recursive=True)
+        results = []
+        stream = _dask(todo, options, scheduler) if scheduler else _local(todo, options, workers)
+        for result in stream:
+            results.append(result)
+            if on_result is not None:
+                on_result(result, len(todo))
+        write_summary(results, out / SUMMARY, previous)
     return results

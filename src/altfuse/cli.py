@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import signal
 import sys
 import time
 import traceback
@@ -35,7 +36,15 @@ from altfuse.params import UNIT_SUFFIXES, InvalidParameter, fields, flag_of, hin
 from altfuse.pipeline import FuseOptions
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
-from altfuse.write import atomic_outputs, refuse_existing, write_json
+from altfuse.write import (
+    Terminated,
+    atomic_outputs,
+    check_paths,
+    interruption,
+    raise_on_sigterm,
+    refuse_existing,
+    write_json,
+)
 
 EXIT_BUG = 3
 
@@ -48,6 +57,14 @@ class _OneLineFormatter(logging.Formatter):
 def _fail(message: str, code: int) -> NoReturn:
     click.echo(f"altfuse: error: {message}", err=True)
     sys.exit(code)
+
+
+def _fail_signalled(exc: BaseException | None) -> None:
+    """Exit as a signal asks (SIGTERM: 143, SIGINT: 130) when ``exc`` is one."""
+    if isinstance(exc, Terminated):
+        _fail("terminated", 128 + signal.SIGTERM)
+    if exc is not None:
+        _fail("interrupted", 128 + signal.SIGINT)
 
 
 def _flag(name: str) -> str:
@@ -72,17 +89,16 @@ class _Cli(click.Group):
         debug = "--debug" in (sys.argv[1:] if argv is None else list(argv))
         try:
             code = super().main(*args, **kwargs)
-        except click.exceptions.Abort:
-            _fail("interrupted", 130)
+        except (click.exceptions.Abort, KeyboardInterrupt, Terminated) as exc:
+            _fail_signalled(exc)
         except click.ClickException as exc:
             _fail(exc.format_message().replace("\n", " "), exc.exit_code)
         except InvalidParameter as exc:  # the library names the parameter; here, its flag
             _fail(f"{_flag(exc.name)} {exc.problem}", exc.exit_code)
         except AltfuseError as exc:
             _fail(str(exc), exc.exit_code)
-        except KeyboardInterrupt:
-            _fail("interrupted", 130)
         except Exception as exc:
+            _fail_signalled(interruption(exc))
             if debug:
                 traceback.print_exc()
             _fail(f"internal error: {type(exc).__name__}: {exc} (rerun with --debug)", EXIT_BUG)
@@ -391,6 +407,7 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
     """
     if plot_path is not None:
         check_plot_path(plot_path)
+    check_paths([json_path, csv_path, plot_path], [log])
     refuse_existing(force, json_path, csv_path, plot_path)
     chosen = [m.strip() for m in (methods or ",".join(METHODS)).split(",") if m.strip()]
     params = params_by_method(_method_values(options), chosen)
@@ -618,4 +635,5 @@ def simulate(
 
 
 def main() -> None:
+    raise_on_sigterm()
     cli()

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from altfuse.errors import ParameterError
 from altfuse.evaluation import Evaluation, evaluate_prepared, truth_or_none
 from altfuse.fuse import DEFAULT_METHOD, params_for
 from altfuse.params import fields
@@ -17,6 +16,7 @@ from altfuse.pipeline import FuseOptions, FuseRun, fuse_log, prepare_log, run_me
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.write import (
     Writer,
+    check_paths,
     default_meta_path,
     fused_table,
     refuse_existing,
@@ -56,11 +56,9 @@ class Outputs:
         return [self.csv, self.meta_path, *(p for p in optional if p is not None)]
 
     def refuse(self, log_path: Path, force: bool = False) -> None:
-        """Refuse outputs that would overwrite the input log, or existing files unless
-        ``force``."""
-        for target in self.paths():
-            if log_path.exists() and target.resolve() == log_path.resolve():
-                raise ParameterError(f"{target} is the input log; choose another output path")
+        """Refuse outputs that would overwrite the input log or each other, or existing files
+        unless ``force`` (:func:`altfuse.write.check_paths`)."""
+        check_paths(self.paths(), [log_path])
         refuse_existing(force, *self.paths())
 
 

@@ -32,11 +32,10 @@ logged at 25 Hz, as older and busier logs do); and two of the other sensors:
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -46,6 +45,7 @@ from altfuse.inertial import G
 from altfuse.io.dataflash_writer import DataFlashWriter
 from altfuse.model import FloatArray
 from altfuse.params import InvalidParameter
+from altfuse.write import atomic_outputs
 
 HOME_AMSL_M = 112.0
 HOME_LAT, HOME_LNG = -35.363261, 149.165230  # ArduPilot's simulator home
@@ -458,24 +458,23 @@ def write_simulated_log(flight: SimulatedFlight, path: str | Path) -> int:
         (BOOT_S + ti, name, values) for name, recs in flight.records.items() for ti, values in recs
     ]
     rows.sort(key=lambda row: row[0])
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            writer = DataFlashWriter(handle)
-            for name, (fmt, columns, units, mults) in _TYPES.items():
-                writer.define(name, fmt, columns, units, mults)
-            faults = ", faults " + "+".join(flight.faults) if flight.faults else ""
-            message = (
-                f"ArduCopter V4.0.0 (simulated by altfuse {__version__}: {flight.scenario}, "
-                f"seed {flight.seed}{faults})"
-            )
-            writer.write("MSG", int(BOOT_S * 1e6), message[:64])
-            for time_s, name, values in rows:
-                writer.write(name, round(time_s * 1e6), *values)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return writer.records
+    records = 0
+
+    def write(handle: BinaryIO) -> None:
+        nonlocal records
+        writer = DataFlashWriter(handle)
+        for name, (fmt, columns, units, mults) in _TYPES.items():
+            writer.define(name, fmt, columns, units, mults)
+        faults = ", faults " + "+".join(flight.faults) if flight.faults else ""
+        message = (
+            f"ArduCopter V4.0.0 (simulated by altfuse {__version__}: {flight.scenario}, "
+            f"seed {flight.seed}{faults})"
+        )
+        writer.write("MSG", int(BOOT_S * 1e6), message[:64])
+        for time_s, name, values in rows:
+            writer.write(name, round(time_s * 1e6), *values)
+        records = writer.records
+
+    with atomic_outputs() as stage:
+        stage(path, write, binary=True)
+    return records

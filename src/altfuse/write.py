@@ -7,17 +7,21 @@ of them are complete, so a failure never leaves a half-written output behind.
 from __future__ import annotations
 
 import contextlib
+import errno
+import glob
 import json
 import os
+import signal
+import socket
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
-from altfuse.errors import ParameterError
+from altfuse.errors import AltfuseError, ParameterError
 
 if TYPE_CHECKING:
     from altfuse.pipeline import FuseRun
@@ -73,39 +77,194 @@ def default_meta_path(csv_path: Path) -> Path:
 
 Writer = Callable[[IO[Any]], None]
 
+#: Every temporary file altfuse writes is named ``.altfuse-HOST-PID-NAME.XXXX.tmp`` beside its
+#: target ``NAME``: only such files are ever cleaned, and only once the process of that id on
+#: this host has gone (a run killed by SIGKILL or a power cut leaves them; the next run to the
+#: same folder removes them). A user's own ``.*.tmp`` files are never touched.
+TEMP_PREFIX = ".altfuse-"
+_HOST = socket.gethostname().replace("-", "_") or "host"
+
+
+class OutputError(AltfuseError):
+    """An output cannot be written: a read-only file system, a full disk, no permission, a
+    symlink loop, a directory in the way."""
+
+
+def _cannot(path: Path, exc: OSError) -> OutputError:
+    return OutputError(f"cannot write {path}: {exc.strerror or exc}")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: alive
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: Path, name: str = "*", recursive: bool = False) -> int:
+    """Delete altfuse's temporary files for ``name`` (a glob) in ``folder`` (and below it, with
+    ``recursive``) whose writer, a process on this host, has gone; return the count."""
+    pattern = f"{TEMP_PREFIX}{glob.escape(_HOST)}-*-{name}.*.tmp"
+    try:
+        found = list(folder.rglob(pattern) if recursive else folder.glob(pattern))
+    except OSError:
+        return 0
+    removed = 0
+    for path in found:
+        pid = path.name[len(TEMP_PREFIX) + len(_HOST) + 1 :].split("-", 1)[0]
+        if pid.isdigit() and not _pid_alive(int(pid)) and path.is_file():
+            with contextlib.suppress(OSError):
+                path.unlink()
+                removed += 1
+    return removed
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised where the process is (as SIGINT raises KeyboardInterrupt), so that the
+    temporary files of :func:`atomic_outputs` are removed on the way out."""
+
+
+def _terminated(_signum: int, _frame: object) -> None:
+    raise Terminated
+
+
+def interruption(exc: BaseException) -> BaseException | None:
+    """The KeyboardInterrupt or :class:`Terminated` that ``exc`` is or hides: a signal that
+    arrives inside a numba-compiled loop surfaces, when the loop returns, as a SystemError
+    caused by the handler's exception."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt | Terminated):
+            return seen
+        seen = seen.__cause__ if isinstance(seen, SystemError) else None
+    return None
+
+
+def raise_on_sigterm() -> None:
+    """Make SIGTERM raise :class:`Terminated` in this process (its main thread)."""
+    signal.signal(signal.SIGTERM, _terminated)
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def check_paths(outputs: Sequence[Path | None], inputs: Sequence[Path] = ()) -> None:
+    """Refuse a run whose outputs include one of its inputs, name one file twice, or are
+    directories: every check before anything is written."""
+    seen: dict[str, Path] = {}
+    for target in (p for p in outputs if p is not None):
+        real = os.path.realpath(target)
+        for source in inputs:
+            if real == os.path.realpath(source) or _same_file(target, source):
+                same = "" if str(target) == str(source) else f" ({source})"
+                raise ParameterError(f"{target} is the input log{same}; choose another output path")
+        if real in seen:
+            raise ParameterError(
+                f"{seen[real]} and {target} are the same file; give each output its own path"
+            )
+        if os.path.isdir(target):
+            raise ParameterError(f"{target} is a directory; an output must be a file path")
+        seen[real] = target
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
 
 @contextlib.contextmanager
 def atomic_outputs() -> Iterator[Callable[..., None]]:
-    """Collect writes into temporary files; rename them into place, in staging order, on success
-    only. ``stage(target, write, binary=False)`` hands ``write`` an open text (or binary) file."""
+    """Collect writes into temporary files; on success rename them all into place, or, if one
+    rename fails, none (the files they replace are put back). ``stage(target, write,
+    binary=False)`` hands ``write`` an open text (or binary) file. Files get the user's umask;
+    an ``OSError`` becomes an :class:`OutputError` naming the path."""
     staged: list[tuple[str, Path]] = []
+    mode = 0o666 & ~_umask()
 
     def stage(target: Path, write: Writer, binary: bool = False) -> None:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            remove_stale_temporaries(target.parent, glob.escape(target.name))
+            prefix = f"{TEMP_PREFIX}{_HOST}-{os.getpid()}-{target.name}."
+            fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=prefix, suffix=".tmp")
+        except OSError as exc:
+            raise _cannot(target, exc) from exc
         staged.append((tmp, target))
-        if binary:
-            with os.fdopen(fd, "wb") as raw:
-                write(raw)
-        else:
-            with os.fdopen(fd, "w", newline="", encoding="utf-8") as text:
-                write(text)
+        try:
+            os.fchmod(fd, mode)
+            if binary:
+                with os.fdopen(fd, "wb") as raw:
+                    write(raw)
+            else:
+                with os.fdopen(fd, "w", newline="", encoding="utf-8") as text:
+                    write(text)
+        except OSError as exc:
+            raise _cannot(target, exc) from exc
 
     try:
         yield stage
+        _commit(staged)
     except BaseException:
         for tmp, _ in staged:
-            with contextlib.suppress(FileNotFoundError):
+            with contextlib.suppress(OSError):
                 os.unlink(tmp)
         raise
-    for tmp, target in staged:
-        os.replace(tmp, target)
+
+
+def _commit(staged: Sequence[tuple[str, Path]]) -> None:
+    """Rename every staged file onto its target, all or none."""
+    done: list[tuple[str, Path, str | None]] = []
+    current = Path()
+    try:
+        for _, current in staged:
+            if os.path.isdir(current):
+                raise IsADirectoryError(errno.EISDIR, "it is a directory")
+        for tmp, current in staged:
+            done.append((tmp, current, _set_aside(current, tmp)))
+            os.replace(tmp, current)
+    except OSError as exc:
+        _undo(done)
+        raise _cannot(current, exc) from exc
+    for _, _, backup in done:
+        if backup is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(backup)
+
+
+def _set_aside(target: Path, tmp: str) -> str | None:
+    """Move an existing ``target`` to a temporary name beside it, to be put back by
+    :func:`_undo` if a later rename fails; its new name, or None when it does not exist."""
+    if not os.path.lexists(target):
+        return None
+    fd, backup = tempfile.mkstemp(
+        dir=target.parent, prefix=f"{os.path.basename(tmp)}.", suffix=".tmp"
+    )
+    os.close(fd)
+    os.replace(target, backup)
+    return backup
+
+
+def _undo(done: Sequence[tuple[str, Path, str | None]]) -> None:
+    for tmp, target, backup in reversed(done):
+        with contextlib.suppress(OSError):
+            if not os.path.exists(tmp):  # its rename happened
+                os.unlink(target)
+            if backup is not None:
+                os.replace(backup, target)
 
 
 def refuse_existing(force: bool, *paths: Path | None) -> None:
     """An existing output is never overwritten without ``force`` (``--force``)."""
     for path in paths:
-        if not force and path is not None and path.exists():
+        if not force and path is not None and os.path.lexists(path):
             raise ParameterError(f"{path} exists; --force overwrites it")
 
 

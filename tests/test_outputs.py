@@ -1,0 +1,310 @@
+"""Outputs under attack (issue 16): a run never writes onto its input or twice onto one file,
+commits all of its files or none, reports a failed write in one line, honours the umask, and
+cleans only its own temporary files, on SIGINT and SIGTERM alike; a batch's outputs and summary
+likewise."""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from click.testing import CliRunner, Result
+
+from altfuse import batch as batch_module
+from altfuse import write
+from altfuse.batch import BatchOptions, run_batch
+from altfuse.cli import cli
+from altfuse.errors import ParameterError
+from altfuse.write import TEMP_PREFIX, OutputError, atomic_outputs, raise_on_sigterm
+from conftest import SAMPLE_LOG
+from test_cli import assert_one_line_error, sha
+
+SAMPLES = SAMPLE_LOG.parent
+
+
+def run(*args: str | Path) -> Result:
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def temporaries(folder: Path) -> list[Path]:
+    return sorted(folder.rglob(f"{TEMP_PREFIX}*"))
+
+
+@pytest.mark.parametrize("flag", ["-o", "--csv"])
+def test_evaluate_never_replaces_its_input(tmp_path: Path, flag: str) -> None:
+    log = tmp_path / "in.bin"
+    shutil.copy(SAMPLE_LOG, log)
+    before = sha(log)
+    result = run("evaluate", log, "--methods", "mean", flag, log, "--force")
+    assert_one_line_error(result, 2, "is the input log")
+    assert sha(log) == before
+
+
+def test_an_output_hard_linked_to_the_input_is_refused(tmp_path: Path) -> None:
+    log = tmp_path / "in.bin"
+    shutil.copy(SAMPLE_LOG, log)
+    os.link(log, tmp_path / "alias.csv")
+    result = run("fuse", log, "-o", tmp_path / "alias.csv", "--force")
+    assert_one_line_error(result, 2, "is the input log")
+    assert sha(log) == sha(SAMPLE_LOG)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["fuse", "{log}", "-o", "{d}/a.csv", "--meta", "{d}/a.csv"],
+        ["fuse", "{log}", "-o", "{d}/a.csv", "--weights", "{d}/a.csv"],
+        ["fuse", "{log}", "-o", "{d}/a.csv", "--weights", "{d}/./a.csv"],
+        ["evaluate", "{log}", "--methods", "mean", "-o", "{d}/r.json", "--csv", "{d}/r.json"],
+    ],
+)
+def test_two_outputs_on_one_path_are_refused(tmp_path: Path, args: list[str]) -> None:
+    argv = [a.format(log=SAMPLE_LOG, d=tmp_path) for a in args]
+    result = run(*argv)
+    assert_one_line_error(result, 2, "are the same file")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_directory_where_the_sidecar_goes_writes_nothing(tmp_path: Path) -> None:
+    (tmp_path / "out.meta.json").mkdir()
+    result = run("fuse", SAMPLE_LOG, "-o", tmp_path / "out.csv", "--force")
+    assert_one_line_error(result, 2, "is a directory")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.meta.json"]
+
+
+def test_a_run_renames_all_of_its_files_or_none(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    first, second = tmp_path / "a.csv", tmp_path / "b.json"
+    first.write_text("the earlier a\n")
+    replace = os.replace
+    calls = []
+
+    def failing(src: str, dst: str) -> None:
+        calls.append(dst)
+        if Path(dst) == second:
+            raise OSError(errno.ENOSPC, "No space left on device", dst)
+        replace(src, dst)
+
+    def both() -> None:
+        with atomic_outputs() as stage:
+            stage(first, lambda f: f.write("the new a\n"))
+            stage(second, lambda f: f.write("{}"))
+
+    monkeypatch.setattr(write.os, "replace", failing)
+    with pytest.raises(OutputError, match=r"cannot write .*b\.json: No space left"):
+        both()
+    assert second in map(Path, calls)
+    assert first.read_text() == "the earlier a\n"  # put back
+    assert not second.exists()
+    assert temporaries(tmp_path) == []
+
+
+@pytest.mark.parametrize("error", [errno.EROFS, errno.ENOSPC, errno.EACCES])
+def test_a_failed_write_is_one_line_exit_1(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, error: int
+) -> None:
+    def refused(*_args: object, **_kwargs: object) -> None:
+        raise OSError(error, os.strerror(error))
+
+    monkeypatch.setattr(write.os, "fchmod", refused)
+    result = run("fuse", SAMPLE_LOG, "-o", tmp_path / "out.csv")
+    assert_one_line_error(result, 1, f"cannot write {tmp_path / 'out.csv'}: {os.strerror(error)}")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_symlink_loop_is_one_line(tmp_path: Path) -> None:
+    (tmp_path / "loop").symlink_to(tmp_path / "loop")
+    result = run("fuse", SAMPLE_LOG, "-o", tmp_path / "loop" / "out.csv")
+    assert_one_line_error(result, 1, "cannot write")
+    (tmp_path / "self.csv").symlink_to(tmp_path / "self.csv")
+    assert_one_line_error(run("fuse", SAMPLE_LOG, "-o", tmp_path / "self.csv"), 2, "exists")
+
+
+def test_outputs_follow_the_umask(tmp_path: Path) -> None:
+    old = os.umask(0o027)
+    try:
+        assert run("fuse", SAMPLE_LOG, "-o", tmp_path / "out.csv").exit_code == 0
+    finally:
+        os.umask(old)
+    assert {p.name: p.stat().st_mode & 0o777 for p in tmp_path.iterdir()} == {
+        "out.csv": 0o640,
+        "out.meta.json": 0o640,
+    }
+
+
+def dead_pid() -> int:
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()
+    return child.pid
+
+
+def test_only_altfuses_own_dead_temporaries_are_cleaned(tmp_path: Path) -> None:
+    host = write._HOST
+    stale = tmp_path / f"{TEMP_PREFIX}{host}-{dead_pid()}-out.csv.abc123.tmp"
+    alive = tmp_path / f"{TEMP_PREFIX}{host}-{os.getpid()}-out.csv.def456.tmp"
+    elsewhere = tmp_path / f"{TEMP_PREFIX}otherhost-{dead_pid()}-out.csv.ghi789.tmp"
+    mine = tmp_path / ".out.csv.notes.tmp"
+    for path in (stale, alive, elsewhere, mine):
+        path.write_text("x")
+    assert run("fuse", SAMPLE_LOG, "-o", tmp_path / "out.csv").exit_code == 0
+    assert not stale.exists()
+    assert [alive.exists(), elsewhere.exists(), mine.exists()] == [True, True, True]
+
+
+def test_sigterm_removes_the_temporaries(tmp_path: Path) -> None:
+    def interrupted() -> None:
+        with atomic_outputs() as stage:
+            stage(tmp_path / "a.csv", lambda f: f.write("a"))
+            stage(tmp_path / "b.csv", lambda _: os.kill(os.getpid(), signal.SIGTERM))
+
+    raise_on_sigterm()
+    try:
+        with pytest.raises(write.Terminated):
+            interrupted()
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/maps")
+def test_sigterm_to_the_command_is_one_line(tmp_path: Path) -> None:
+    log = tmp_path / "long.bin"
+    assert run("simulate", "hover", "-o", log, "--duration", "900").exit_code == 0
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "altfuse", "fuse", str(log), "-o", str(out / "f.csv")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    maps = Path(f"/proc/{proc.pid}/maps")
+    deadline = time.monotonic() + 60
+    # the log mapped: past start-up, reading
+    while proc.poll() is None and time.monotonic() < deadline and str(log) not in maps.read_text():
+        time.sleep(0.005)
+    proc.send_signal(signal.SIGTERM)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM, stderr
+    assert stderr.strip() == "altfuse: error: terminated"
+    assert temporaries(tmp_path) == []
+    assert not out.exists() or list(out.iterdir()) == []
+
+
+def copies(folder: Path, *names: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        shutil.copy(SAMPLES / "paper_a.bin", folder / name)
+    return folder
+
+
+def test_batch_refuses_stems_that_differ_only_in_case_or_extension(tmp_path: Path) -> None:
+    logs = copies(tmp_path / "logs", "flight.bin", "flight.BIN", "other.Bin")
+    with pytest.raises(ParameterError, match=r"flight\.BIN and .*flight\.bin would write"):
+        run_batch([logs], tmp_path / "out", jobs=1)
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(ParameterError, match="would write the same outputs"):
+        run_batch([copies(tmp_path / "two", "x.bin"), tmp_path / "logs" / "flight.bin",
+                   copies(tmp_path / "three", "flight.bin")], tmp_path / "out", jobs=1)  # fmt: skip
+
+
+def test_batch_keeps_the_users_hidden_files(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".draft.tmp").write_text("mine")
+    stale = out / "sub" / f"{TEMP_PREFIX}{write._HOST}-{dead_pid()}-a.csv.zz.tmp"
+    stale.parent.mkdir()
+    stale.write_text("left by a killed run")
+    run_batch([copies(tmp_path / "logs", "a.bin")], out, jobs=1)
+    assert (out / ".draft.tmp").read_text() == "mine"
+    assert not stale.exists()
+
+
+def test_batch_summary_is_merged_not_replaced(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    [first] = run_batch([copies(tmp_path / "one", "a.bin")], out, jobs=1)
+    assert first.status == "ok"
+    run_batch([copies(tmp_path / "two", "b.bin")], out, jobs=1)
+    summary = pd.read_csv(out / "summary.csv")
+    assert summary["log"].tolist() == ["a.bin", "b.bin"]
+    assert (summary["status"] == "ok").all()
+    # a skipped log keeps its earlier row and metrics
+    again = BatchOptions(skip_existing=True)
+    run_batch([tmp_path / "two"], out, again, jobs=1)
+    summary = pd.read_csv(out / "summary.csv").set_index("log")
+    assert summary.loc["b.bin", "status"] == "skipped"
+    assert summary.loc["b.bin", "samples"] > 0
+    # --force starts the summary afresh
+    run_batch([tmp_path / "two"], out, BatchOptions(force=True), jobs=1)
+    assert pd.read_csv(out / "summary.csv")["log"].tolist() == ["b.bin"]
+    (out / "summary.csv").write_text("not,a\nsummary,at all\n")
+    with pytest.raises(ParameterError, match="not a batch summary"):
+        run_batch([tmp_path / "two"], out, again, jobs=1)
+
+
+def test_a_damaged_sidecar_means_redo_that_log(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    logs = copies(tmp_path / "logs", "a.bin")
+    run_batch([logs], out, jobs=1)
+    (out / "a.meta.json").write_text('{"input": {"sha256": "x"}, "outputs": ["a.csv"]}')
+    [result] = run_batch([logs], out, BatchOptions(skip_existing=True, force=True), jobs=1)
+    assert result.status == "ok"
+
+
+def test_two_batches_on_one_folder_cannot_race(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    logs = copies(tmp_path / "logs", "a.bin")
+    with (
+        batch_module._locked(out),
+        pytest.raises(ParameterError, match="another altfuse batch is writing"),
+    ):
+        run_batch([logs], out, jobs=1)
+    assert run_batch([logs], out, jobs=1)[0].status == "ok"
+
+
+def test_any_file_name_goes_into_the_summary(tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    raw = os.fsencode(logs) + b"/caf\xe9.bin"  # Latin-1, not UTF-8
+    shutil.copy(SAMPLES / "paper_a.bin", raw)
+    [result] = run_batch([logs], tmp_path / "out", jobs=1)
+    assert result.status == "ok"
+    assert result.log == "caf\\xe9.bin"
+    assert pd.read_csv(tmp_path / "out" / "summary.csv")["log"].tolist() == ["caf\\xe9.bin"]
+
+
+def children(pid: int) -> set[int]:
+    found = set()
+    for task in Path(f"/proc/{pid}/task").glob("*/children"):
+        found |= {int(c) for c in task.read_text().split()}
+    return found
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_batch_workers_die_with_their_parent(tmp_path: Path) -> None:
+    logs = copies(tmp_path / "logs", *(f"{i}.bin" for i in range(8)))
+    command = [sys.executable, "-m", "altfuse", "batch", str(logs), "-o", str(tmp_path / "out")]
+    proc = subprocess.Popen([*command, "--jobs", "2"], stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    workers: set[int] = set()
+    while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
+        workers = children(proc.pid)
+        time.sleep(0.05)
+    assert len(workers) >= 2, "no workers seen"
+    proc.kill()
+    proc.wait()
+    deadline = time.monotonic() + 10
+    while any(Path(f"/proc/{w}").exists() for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    # a zombie reaped by init is gone too; a live worker has /proc/PID/status "State: R/S"
+    alive = [w for w in workers if Path(f"/proc/{w}").exists()
+             and "zombie" not in Path(f"/proc/{w}/status").read_text()]  # fmt: skip
+    assert alive == []
