@@ -165,7 +165,9 @@ def paper_a(t: FloatArray, duration_s: float) -> Profile:
         (start + 25.5, start + 40.0),
     )
     h = _level_profile(t, 8.0, 10.0, 15.0, duration_s - 18.0)
-    h = h + 0.3 * np.sin(2 * np.pi * (t - start) / 16.0) * (h > 14.9)
+    # the swell fades in over the last metre of the climb: switched on at a threshold it was
+    # a jump of up to 0.3 m, +-620 m/s^2 on the accelerometer, beyond any IMU's range
+    h = h + 0.3 * np.sin(2 * np.pi * (t - start) / 16.0) * _smoothstep(h - 14.0)
     in_dep = (t >= departs[0]) & (t < departs[1])
     in_scatter = (t >= scatter[0]) & (t < scatter[1])
     departure = np.where(in_dep, 2.5 * np.sin(np.pi * (t - departs[0]) / 11.9), 0.0)
@@ -190,7 +192,8 @@ def hover(t: FloatArray, duration_s: float) -> Profile:
     ground, climb = 10.0, 80.0
     h = _level_profile(t, ground, climb, 240.0, None)
     hovering = t >= ground + climb
-    h = h + np.where(hovering, 0.3 * np.sin(2 * np.pi * (t - ground - climb) / 20.0), 0.0)
+    swell = 0.3 * np.sin(2 * np.pi * (t - ground - climb) / 20.0)
+    h = h + swell * _smoothstep((t - ground - climb) / 5.0)  # no velocity jump at its start
     flying = _airborne(t, ground, duration_s + 10.0)
     ones = np.ones_like(t)
     return Profile(
