@@ -30,7 +30,7 @@ from altfuse.screen import (
     screen,
     screen_series,
 )  # fmt: skip
-from altfuse.simulate import SimulatedFlight, simulate_flight, write_simulated_log
+from altfuse.simulate import _TYPES, SimulatedFlight, simulate_flight, write_simulated_log
 from conftest import SAMPLE_LOG, ardupilot_logs, shared_log
 
 
@@ -238,3 +238,55 @@ def test_the_references_are_screened_like_the_sensors() -> None:
     sim = screen(flight).references[0]
     assert sim.dropped == {BACKWARDS: 1}
     assert np.all(np.diff(sim.t) > 0)
+
+
+def _fused_with(
+    sim: SimulatedFlight, path: Path, method: str
+) -> tuple[pd.DataFrame, dict[str, object], str]:
+    write_simulated_log(sim, path)
+    out = path.with_suffix(".csv")
+    result = CliRunner().invoke(cli, ["fuse", str(path), "-o", str(out), "-m", method])
+    assert result.exit_code == 0, result.output
+    meta = json.loads(out.with_suffix(".meta.json").read_text())
+    return pd.read_csv(out), meta, result.stderr
+
+
+@pytest.mark.parametrize("method", ["smoother", "multilayer"])
+@pytest.mark.parametrize(
+    ("type_name", "field", "value"),
+    [
+        ("IMU", "AccZ", 1e6),  # one sample of 1e6 m/s^2 took the smoother 1.2e6 m away
+        ("IMU", "AccX", float("nan")),
+        ("IMU", "AccY", float("-inf")),
+        ("ATT", "Roll", float("nan")),  # the spline after tilt correction refused it
+        ("ATT", "Roll", 1e38),  # the rangefinder was scaled by cos(1.7e36)
+        ("ATT", "Pitch", float("inf")),
+    ],
+)
+def test_an_impossible_imu_or_attitude_sample_is_dropped_and_moves_nothing(
+    tmp_path: Path, method: str, type_name: str, field: str, value: float
+) -> None:
+    sim = simulate_flight("mission", seed=4)
+    i = len(sim.records[type_name]) // 2
+    bad = list(sim.records[type_name][i][1])
+    bad[_TYPES[type_name][1].split(",").index(field) - 1] = value  # less TimeUS
+    dirty, meta, stderr = _fused_with(
+        _variant(sim, type_name, i, tuple(bad)), tmp_path / "dirty.bin", method
+    )
+    clean, _, _ = _fused_with(_variant(sim, type_name, i, None), tmp_path / "clean.bin", method)
+    pd.testing.assert_frame_equal(dirty, clean)
+    source = "IMU[0].Acc" if type_name == "IMU" else "ATT"
+    assert f"{source} 1" in stderr
+    assert len(stderr.strip().splitlines()) == 1
+    assert meta["method"] == method
+
+
+def test_an_accelerometer_saturated_everywhere_is_no_accelerometer(tmp_path: Path) -> None:
+    sim = simulate_flight("mission", seed=4)
+    records = {k: list(v) for k, v in sim.records.items()}
+    records["IMU"] = [(t, (v[0], v[1], 3.4e38, v[3])) for t, v in records["IMU"]]
+    broken = SimulatedFlight(sim.scenario, sim.seed, sim.duration_s, (), sim.profile, records)
+    table, meta, stderr = _fused_with(broken, tmp_path / "sat.bin", "smoother")
+    assert np.isfinite(table["fused_alt_m"]).all()
+    assert str(meta["parameters"]["model"]).startswith("altitude-only")  # type: ignore[index]
+    assert f"IMU[0].Acc {len(records['IMU'])}" in stderr

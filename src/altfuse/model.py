@@ -141,3 +141,5 @@ class FlightLog:
     vertical_velocity: Series | None = None  # a GPS's vertical velocity up [m/s], "velocity"
     vibration: Vibration | None = None
     temperatures: dict[str, Series] = field(default_factory=dict)  # [degC] by sensor name
+    # samples of the inputs beside the altitudes (IMU, ATT, ...) dropped by screening, by source
+    dropped_inputs: dict[str, int] = field(default_factory=dict)

@@ -26,6 +26,14 @@ RFND Stat) come first; these checks come after, on each source:
   (``STUCK_MIN_SAMPLES`` samples) while another source moved more than its noise and
   ``MOTION_MIN_M``: a receiver that reports 0.00 m with a 3D fix, a frozen driver. A sensor at
   rest on the ground, as every source in a simulator, is not stuck while the others rest too.
+
+The other inputs a method uses are screened too (:func:`screen_inputs`): the accelerometer,
+the attitude, the vibration levels, the GPS's speeds and the barometers' temperatures lose
+every sample that is not a finite number or is beyond what the instrument can report (a
+specific force over ``MAX_SPECIFIC_FORCE_M_S2``, an angle over 2 pi, a speed over
+``MAX_SPEED_M_S``), and the samples whose times are out of order or far outside the log. One
+``IMU.AccZ`` of 1e6 m/s^2 once took the smoother 1.2e6 m away; one ``ATT.Roll`` of 1e38 scaled
+the rangefinder by cos(1.7e36).
 """
 
 from __future__ import annotations
@@ -37,7 +45,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from altfuse.metrics import white_noise_sigma
-from altfuse.model import FlightLog, FloatArray, Series
+from altfuse.model import Attitude, FlightLog, FloatArray, Imu, Series, Vibration
 
 Mask = npt.NDArray[np.bool_]
 
@@ -50,6 +58,15 @@ SPIKE = "spike (faster than 50 m/s to both neighbours)"
 BELOW_MINIMUM = "rangefinder at or below its minimum range"
 STUCK = "stuck at one value while the others moved"
 REASONS = (BACKWARDS, OUTSIDE_LOG, ENVELOPE, CODE, PINNED, SPIKE, BELOW_MINIMUM, STUCK)
+
+#: The largest specific force an autopilot's IMU reports [m/s^2]: +-16 g is the common range,
+#: +-40 g the largest ArduPilot drives (ADIS16470); beyond 50 g a sample is corrupt.
+MAX_SPECIFIC_FORCE_M_S2 = 50 * 9.80665
+MAX_ANGLE_RAD = 2 * np.pi
+#: Horizontal and vertical speeds [m/s] beyond any aircraft altfuse fuses (about Mach 1).
+MAX_SPEED_M_S = 340.0
+#: Temperatures [degC] a barometer can log: its operating range with a wide margin.
+TEMPERATURE_RANGE_C = (-80.0, 150.0)
 
 ENVELOPE_M = {
     "gps": (-500.0, 12_000.0),
@@ -233,16 +250,88 @@ def screen(flight: FlightLog) -> FlightLog:
         else:
             reasons = ", ".join(f"{n} {r}" for r, n in screened.dropped.items())
             dropped_sources[s.name] = f"{s.source}: no plausible sample ({reasons})"
+    return screen_inputs(
+        replace(
+            flight,
+            sensors=tuple(sensors),
+            references=references,
+            dropped_sources=dropped_sources,
+            notes=tuple(notes),
+        ),
+        span,
+    )
+
+
+def _keep_rows(
+    t: FloatArray, values: FloatArray, low: float, high: float, span: tuple[float, float] | None
+) -> tuple[Mask, int]:
+    """The rows (samples) of ``values`` (n, k) at times ``t`` that are finite, within
+    [``low``, ``high``] in every column, in time order and inside ``span``; the count of
+    the others."""
+    values = values.reshape(t.size, -1)
+    keep = np.isfinite(t) & np.isfinite(values).all(axis=1)
+    keep &= ((values >= low) & (values <= high)).all(axis=1) | ~keep
+    if span is not None:
+        keep &= (t >= span[0]) & (t <= span[1])
+    kept = np.flatnonzero(keep)
+    keep[kept[_out_of_order(t[kept])]] = False
+    return keep, int(t.size - keep.sum())
+
+
+def screen_inputs(flight: FlightLog, span: tuple[float, float] | None) -> FlightLog:
+    """``flight`` without the impossible samples of its other inputs (see the module doc),
+    counted in ``dropped_inputs`` by source; a source left with none is removed."""
+    counts = dict(flight.dropped_inputs)
+    force = MAX_SPECIFIC_FORCE_M_S2
+
+    def rows(source: str, t: FloatArray, values: FloatArray, low: float, high: float) -> Mask:
+        keep, n = _keep_rows(t, values, low, high, span)
+        if n:
+            counts[source] = counts.get(source, 0) + n
+        return keep
+
+    imu, att, vib = flight.imu, flight.attitude, flight.vibration
+    if imu is not None:
+        keep = rows(imu.source, imu.t, imu.acc, -force, force)
+        imu = Imu(imu.source, imu.t[keep], imu.acc[keep]) if keep.any() else None
+    if att is not None:
+        angles = np.column_stack([att.roll, att.pitch, att.yaw])
+        keep = rows(att.source, att.t, angles, -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
+        att = Attitude(att.source, att.t[keep], *angles[keep].T) if keep.any() else None
+    if vib is not None:
+        both = np.column_stack([vib.level, vib.clips])
+        keep = rows(vib.source, vib.t, both, 0.0, np.inf)
+        vib = Vibration(vib.source, vib.t[keep], vib.level[keep], vib.clips[keep])
+        vib = vib if keep.any() else None
+
+    def series(s: Series | None, low: float, high: float) -> Series | None:
+        if s is None:
+            return None
+        keep = rows(s.source, s.t, s.value, low, high)
+        return replace(s, t=s.t[keep], value=s.value[keep]) if keep.any() else None
+
+    speed = series(flight.ground_speed, 0.0, MAX_SPEED_M_S)
+    climb = series(flight.vertical_velocity, -MAX_SPEED_M_S, MAX_SPEED_M_S)
+    temperatures = {
+        name: kept
+        for name, s in flight.temperatures.items()
+        if (kept := series(s, *TEMPERATURE_RANGE_C)) is not None
+    }
     return replace(
         flight,
-        sensors=tuple(sensors),
-        references=references,
-        dropped_sources=dropped_sources,
-        notes=tuple(notes),
+        imu=imu,
+        attitude=att,
+        vibration=vib,
+        ground_speed=speed,
+        vertical_velocity=climb,
+        temperatures=temperatures,
+        dropped_inputs=counts,
     )
 
 
 def implausible_count(flight: FlightLog) -> dict[str, int]:
-    """Samples dropped by screening, per source (the reader's own filters excluded)."""
+    """Samples dropped by screening, per altitude source (the reader's own filters excluded)
+    and per other input (``IMU[0].Acc``, ``ATT``, ...)."""
     counts = {s.name: sum(n for r, n in s.dropped.items() if r in REASONS) for s in flight.sensors}
+    counts.update(flight.dropped_inputs)
     return {name: n for name, n in counts.items() if n}
