@@ -191,7 +191,6 @@ def hover(t: FloatArray, duration_s: float) -> Profile:
     """Paper B's experiment: a climb to 240 m at 3 m/s and a hover there (position hold)."""
     ground, climb = 10.0, 80.0
     h = _level_profile(t, ground, climb, 240.0, None)
-    hovering = t >= ground + climb
     swell = 0.3 * np.sin(2 * np.pi * (t - ground - climb) / 20.0)
     h = h + swell * _smoothstep((t - ground - climb) / 5.0)  # no velocity jump at its start
     flying = _airborne(t, ground, duration_s + 10.0)
