@@ -33,6 +33,7 @@ from __future__ import annotations
 import logging
 import re
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +43,7 @@ from pymavlink.DFReader import FORMAT_TO_STRUCT
 
 from altfuse.errors import LogReadError
 from altfuse.io import sha256_of
-from altfuse.io.fastdf import Index, _text, index_file
+from altfuse.io.fastdf import Format, Index, _text, index_file
 from altfuse.model import (
     Attitude,
     FlightLog,
@@ -63,6 +64,10 @@ _OTHER_TYPES = (
 )  # fmt: skip
 WANTED_TYPES = frozenset(_SENSOR_TYPES + _OTHER_TYPES)
 
+#: Format characters of text and arrays: never a number.
+_TEXT_CHARS = frozenset("nNZa")
+#: The most instances of one sensor type ArduPilot logs (RNGFND_MAX_INSTANCES is 10).
+MAX_INSTANCES = 10
 #: Format characters whose scale pymavlink applies itself.
 _SELF_SCALED = frozenset("cCeEL")
 #: Multiplier ids that mean "none" ('-'), "unknown" ('?') or 1 ('0').
@@ -104,8 +109,16 @@ class _Records:
 
     def __init__(self, index: Index) -> None:
         self.index = index
-        self.formats = {f.name: f for f in index.formats.values()}
         self.counts = index.counts()
+        self.formats: dict[str, Format] = {}
+        self.problems: dict[str, str] = {}  # wanted types whose records are not decoded, why
+        for f in index.formats.values():
+            if f.name in self.formats:  # two type ids, one name: which is which?
+                other = self.formats[f.name].type_id
+                f = replace(f, problem=f"type ids {other} and {f.type_id} both name it")
+            self.formats[f.name] = f
+            if f.problem is not None and f.name in WANTED_TYPES and self.n(f.name):
+                self.problems[f.name] = f.problem
         self._tables: dict[str, npt.NDArray[Any]] = {}
         self._raw: dict[tuple[str, str], FloatArray] = {}
         self.fmtu: dict[int, tuple[str, str]] = {}
@@ -136,7 +149,12 @@ class _Records:
 
     def has(self, type_name: str, *fields: str) -> bool:
         fmt = self.formats.get(type_name)
-        return fmt is not None and self.n(type_name) > 0 and all(f in fmt.columns for f in fields)
+        return (
+            fmt is not None
+            and fmt.problem is None
+            and self.n(type_name) > 0
+            and all(f in fmt.columns for f in fields)
+        )
 
     def timed(self, type_name: str, *fields: str) -> bool:
         """:meth:`has`, and the type has a time field (damage can rename it in its FMT)."""
@@ -164,7 +182,12 @@ class _Records:
         key = (type_name, col)
         if key not in self._raw:
             fmt = self.formats[type_name]
-            self._raw[key] = _scaled(self.table(type_name)[col], fmt.format[fmt.columns.index(col)])
+            char = fmt.format[fmt.columns.index(col)]
+            if char in _TEXT_CHARS:  # a number declared as text: no number to read
+                self.problems[f"{type_name}.{col}"] = f"declared as text ({char!r}), not a number"
+                self._raw[key] = np.full(self.n(type_name), np.nan)
+            else:
+                self._raw[key] = _scaled(self.table(type_name)[col], char)
         return self._raw[key]
 
     def text(self, type_name: str, col: str) -> list[str]:
@@ -212,7 +235,14 @@ def _instances(rec: _Records, type_name: str, field: str, default: int) -> Itera
         yield default, np.ones(n, dtype=bool)
         return
     inst = rec.raw(type_name, field)
-    for i in np.unique(inst[np.isfinite(inst)]):
+    found = np.unique(inst[np.isfinite(inst)])
+    if found.size > MAX_INSTANCES or np.any((found < 0) | (found != np.round(found))):
+        rec.problems[f"{type_name}.{field}"] = (
+            f"{found.size:,} distinct instance numbers (at most {MAX_INSTANCES}, whole, from 0): "
+            "its FMT's columns are likely mislabelled"
+        )
+        return
+    for i in found:
         yield int(i), inst == i
 
 
@@ -568,9 +598,16 @@ def read_dataflash(path: str | Path) -> FlightLog:
     have_rangefinder = _read_rangefinder(b)
     _read_ctun_fallbacks(b, have_baro, have_rangefinder)
     vehicle, firmware = _firmware(rec)
+    imu, attitude, vibration = _read_imu(rec), _read_attitude(rec), _read_vibration(rec)
+    references = tuple(_read_references(rec))
+    speed, climb = _read_gps_field(rec, "Spd"), _read_gps_field(rec, "VZ", sign=-1.0)
     skipped = rec.index.size - rec.index.decoded_bytes
     if skipped:
         b.notes.append(f"{skipped} bytes were not part of any decodable record")
+    for what, problem in rec.problems.items():  # after every read: reading finds some
+        b.notes.append(f"{what}: not read: {problem}")
+        if what.split(".")[0] in _SENSOR_TYPES:
+            b.dropped_sources.setdefault(what, f"not read: {problem}")
     return FlightLog(
         path=str(path),
         sha256=sha256_of(path),
@@ -578,17 +615,17 @@ def read_dataflash(path: str | Path) -> FlightLog:
         vehicle=vehicle,
         firmware=firmware,
         sensors=tuple(b.sensors[k] for k in sorted(b.sensors, key=_sensor_order)),
-        references=tuple(_read_references(rec)),
-        imu=_read_imu(rec),
-        attitude=_read_attitude(rec),
+        references=references,
+        imu=imu,
+        attitude=attitude,
         record_counts=dict(sorted(rec.counts.items())),
         skipped_bytes=skipped,
         notes=tuple(b.notes),
         dropped_sources=b.dropped_sources,
         params=_params(rec),
-        ground_speed=_read_gps_field(rec, "Spd"),
-        vertical_velocity=_read_gps_field(rec, "VZ", sign=-1.0),
-        vibration=_read_vibration(rec),
+        ground_speed=speed,
+        vertical_velocity=climb,
+        vibration=vibration,
         temperatures=b.temperatures,
     )
 

@@ -18,12 +18,19 @@ What this module changes is the *how*: instead of one Python object per record, 
 
 Like pymavlink's parser, the walk stops at the first record that the file ends inside, and a
 type is known only from its FMT record on. The bytes not in any record are the skipped bytes.
+
+A FMT record that cannot describe its records truthfully keeps its length (the walk steps over
+its records as pymavlink's does) but gets a ``problem``, and the reader decodes none of its
+records: a Columns list whose count differs from the format's (a leading comma shifted every
+name by one: BARO's Alt read its Temp), or a second definition of the type that differs from
+the first (pymavlink decodes the records after it with the new one; a table of the type
+cannot hold both, so it is refused, with the reason).
 """
 
 from __future__ import annotations
 
 import mmap
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -59,23 +66,34 @@ class Format:
     format: str
     columns: tuple[str, ...]
     dtype: np.dtype[Any] = field(repr=False)
+    problem: str | None = None  # why its records are not to be decoded
 
     @classmethod
     def build(cls, type_id: int, name: str, length: int, fmt: str, columns: str) -> Format:
         names = tuple(columns.split(",")) if columns else ()
+        problem = None
+        if len(names) != len(fmt):
+            problem = f"its FMT names {len(names)} columns for {len(fmt)} fields ({fmt!r})"
+        elif len(set(names)) != len(names) or not all(names):
+            problem = f"its FMT column names are empty or repeated ({columns!r})"
         fields = []
         for i, char in enumerate(fmt):
             if char not in FORMAT_TO_STRUCT:
                 raise FormatError(f"{name}: unknown format character {char!r}")
             struct_code = FORMAT_TO_STRUCT[char][0]
             np_type = "(32,)<i2" if char == "a" else _NUMPY[struct_code]
-            fields.append((names[i] if i < len(names) else f"_{i}", np_type))
+            fields.append((names[i] if problem is None else f"_{i}", np_type))
         dtype = np.dtype(fields)
         if dtype.itemsize != length - HEADER:
             raise FormatError(
                 f"{name}: format {fmt!r} is {dtype.itemsize} bytes, FMT says {length}"
             )
-        return cls(type_id, name, length, fmt, names, dtype)
+        return cls(type_id, name, length, fmt, names if problem is None else (), dtype, problem)
+
+    def same_layout(self, other: Format) -> bool:
+        return (self.name, self.length, self.format, self.columns) == (
+            other.name, other.length, other.format, other.columns
+        )  # fmt: skip
 
 
 @dataclass
@@ -150,15 +168,21 @@ def _formats(
     rows = np.ndarray(shape=(count,), dtype=fmt_dtype, buffer=data, strides=(1,))[at + HEADER]
     for offset, row in zip(at.tolist(), rows, strict=True):
         type_id, length = int(row["Type"]), int(row["Length"])
-        if type_id in formats or length <= HEADER:
+        if length <= HEADER or type_id == FMT_TYPE:
             continue
         try:
-            formats[type_id] = Format.build(
+            found = Format.build(
                 type_id, _text(row["Name"]), length, _text(row["Format"]), _text(row["Columns"])
             )
         except (FormatError, ValueError, KeyError):
             continue
-        first[type_id] = offset
+        known = formats.get(type_id)
+        if known is None:
+            formats[type_id] = found
+            first[type_id] = offset
+        elif known.problem is None and not known.same_layout(found):
+            why = f"it is defined again at byte {offset} with another layout ({found.format!r})"
+            formats[type_id] = replace(known, problem=why)
     return formats, first
 
 
