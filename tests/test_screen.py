@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
-from altfuse.align import MAX_TICKS, align
+from altfuse.align import align, tick_cap
 from altfuse.cli import cli
 from altfuse.errors import NoUsableSensorsError
 from altfuse.info import damage
@@ -138,7 +138,8 @@ def test_info_reports_skipped_bytes_and_dropped_samples(name: str) -> None:
 def test_garbage_timestamps_cannot_allocate_a_huge_clock() -> None:
     t = np.concatenate([np.arange(100) * 0.1, [4e6]])  # one sample 46 days later
     s = series("baro", t, np.ones(t.size))
-    with pytest.raises(NoUsableSensorsError, match=f"more than {MAX_TICKS:,}"):
+    assert tick_cap([s]) == 1_000_000  # a day at 10 Hz, whatever the few samples
+    with pytest.raises(NoUsableSensorsError, match=r"more than 1,000,000 \(1,000 per sample"):
         align([s], rate_hz=10.0)
 
 
@@ -290,3 +291,34 @@ def test_an_accelerometer_saturated_everywhere_is_no_accelerometer(tmp_path: Pat
     assert np.isfinite(table["fused_alt_m"]).all()
     assert str(meta["parameters"]["model"]).startswith("altitude-only")  # type: ignore[index]
     assert f"IMU[0].Acc {len(records['IMU'])}" in stderr
+
+
+def _shifted(sim: SimulatedFlight, after_share: float, by_s: float) -> SimulatedFlight:
+    """``sim`` with every record from ``after_share`` of its duration on ``by_s`` later."""
+    cut = after_share * sim.duration_s
+    records = {
+        k: [(t + by_s if t >= cut else t, v) for t, v in recs] for k, recs in sim.records.items()
+    }
+    return SimulatedFlight(sim.scenario, sim.seed, sim.duration_s, (), sim.profile, records)
+
+
+def test_records_days_later_are_dropped_not_a_clock_of_millions_of_ticks(tmp_path: Path) -> None:
+    sim = simulate_flight("mission", seed=4)
+    table, meta, stderr = _fused_with(_shifted(sim, 0.8, 970_000.0), tmp_path / "j.bin", "mean")
+    span = float(table["time_s"].iloc[-1] - table["time_s"].iloc[0])
+    assert span < 0.81 * sim.duration_s
+    assert len(table) < 0.81 * sim.duration_s * 10 + 2
+    gps = next(s for s in meta["sensors_used"] if s["name"] == "gps")  # type: ignore[attr-defined]
+    assert gps["samples_dropped"][OUTSIDE_LOG] > 0.19 * sim.duration_s * 5
+    assert "implausible samples dropped" in stderr
+
+
+def test_every_timestamp_near_2_to_the_63_is_refused_in_one_line(tmp_path: Path) -> None:
+    sim = simulate_flight("mission", seed=4)
+    path = tmp_path / "far.bin"
+    write_simulated_log(_shifted(sim, 0.0, 2.0**63 / 1e6), path)
+    result = CliRunner().invoke(cli, ["fuse", str(path), "-o", str(tmp_path / "x.csv")])
+    assert result.exit_code == 1
+    [line] = result.stderr.strip().splitlines()
+    assert "time beyond ten years since boot" in line
+    assert not (tmp_path / "x.csv").exists()

@@ -31,8 +31,17 @@ from altfuse.model import FloatArray, SensorKind, Series, sensor_kind
 
 Span = Literal["union", "overlap"]
 SPANS: tuple[Span, ...] = get_args(Span)
-#: Most ticks a clock may have (11.6 days at 10 Hz): garbage timestamps must not allocate a grid.
-MAX_TICKS = 10_000_000
+#: Most ticks a clock may have: ``TICKS_PER_SAMPLE`` per sample of all the sources, at least
+#: ``MIN_TICK_CAP`` (a day at 10 Hz is 864,000). Timestamps the screening let through must not
+#: allocate a clock of millions of empty ticks (a log's last records 970,000 s later gave a
+#: 9.7 M-row CSV); a long pause between flights in one log stays well inside.
+MIN_TICK_CAP = 1_000_000
+TICKS_PER_SAMPLE = 1_000
+
+
+def tick_cap(series: Sequence[Series]) -> int:
+    """The most ticks a clock of ``series`` may have (see ``TICKS_PER_SAMPLE``)."""
+    return max(MIN_TICK_CAP, TICKS_PER_SAMPLE * sum(s.t.size for s in series))
 
 
 @dataclass(frozen=True)
@@ -133,11 +142,13 @@ def make_grid(series: Sequence[Series], rate_hz: float, span: Span) -> FloatArra
     ends = [float(s.t.max()) for s in series]
     start, end = (min(starts), max(ends)) if span == "union" else (max(starts), min(ends))
     first, last = math.ceil(start * rate_hz - 1e-9), math.floor(end * rate_hz + 1e-9)
-    if last - first + 1 > MAX_TICKS:
+    cap = tick_cap(series)
+    if last - first + 1 > cap:
         hours = (end - start) / 3600
         raise NoUsableSensorsError(
             f"the altitude sources span {hours:,.1f} h: {last - first + 1:,} ticks at "
-            f"{rate_hz:g} Hz, more than {MAX_TICKS:,}; lower --rate or check the log's timestamps"
+            f"{rate_hz:g} Hz, more than {cap:,} ({TICKS_PER_SAMPLE:,} per sample); lower --rate "
+            "or check the log's timestamps"
         )
     if last < first:
         raise NoUsableSensorsError(

@@ -57,7 +57,10 @@ PINNED = "rangefinder pinned at its maximum"
 SPIKE = "spike (faster than 50 m/s to both neighbours)"
 BELOW_MINIMUM = "rangefinder at or below its minimum range"
 STUCK = "stuck at one value while the others moved"
-REASONS = (BACKWARDS, OUTSIDE_LOG, ENVELOPE, CODE, PINNED, SPIKE, BELOW_MINIMUM, STUCK)
+BEYOND_BOOT = "time beyond ten years since boot"
+REASONS = (
+    BEYOND_BOOT, BACKWARDS, OUTSIDE_LOG, ENVELOPE, CODE, PINNED, SPIKE, BELOW_MINIMUM, STUCK,
+)  # fmt: skip
 
 #: The largest specific force an autopilot's IMU reports [m/s^2]: +-16 g is the common range,
 #: +-40 g the largest ArduPilot drives (ADIS16470); beyond 50 g a sample is corrupt.
@@ -78,6 +81,8 @@ PINNED_MIN_SAMPLES = 10
 SPIKE_MIN_M = 10.0
 MAX_VERTICAL_SPEED_M_S = 50.0
 TIME_MARGIN_MIN_S = 600.0
+TIME_JUMP_S = 86_400.0
+MAX_BOOT_S = 10 * 365.25 * 86_400.0
 STUCK_MIN_S = 5.0
 STUCK_MIN_SAMPLES = 10
 MOTION_MIN_M = 1.0
@@ -96,9 +101,11 @@ def rangefinder_param(params: dict[str, float], name: str, suffix: str) -> float
 def log_span(series: tuple[Series, ...]) -> tuple[float, float] | None:
     """The span of the bulk of all samples, widened by the far-outside margin."""
     times = np.concatenate([s.t for s in series]) if series else np.zeros(0)
-    times = times[np.isfinite(times)]
+    times = np.sort(times[np.isfinite(times) & (times <= MAX_BOOT_S)])
     if times.size < 10:
         return None
+    parts = np.split(times, np.flatnonzero(np.diff(times) > TIME_JUMP_S) + 1)
+    times = max(parts, key=len)
     lo, hi = np.percentile(times, [1.0, 99.0])
     margin = max(TIME_MARGIN_MIN_S, 0.5 * (hi - lo))
     return float(lo - margin), float(hi + margin)
@@ -156,7 +163,7 @@ def screen_series(
     rangefinder_min_m: float | None = None,
 ) -> Series:
     """``s`` without its impossible samples; ``dropped`` counts them by reason."""
-    checks: list[tuple[str, Mask]] = []
+    checks: list[tuple[str, Mask]] = [(BEYOND_BOOT, s.t > MAX_BOOT_S)]
     if span is not None:
         checks.append((OUTSIDE_LOG, (s.t < span[0]) | (s.t > span[1])))
     checks.append((BACKWARDS, _out_of_order(s.t)))
@@ -269,7 +276,7 @@ def _keep_rows(
     [``low``, ``high``] in every column, in time order and inside ``span``; the count of
     the others."""
     values = values.reshape(t.size, -1)
-    keep = np.isfinite(t) & np.isfinite(values).all(axis=1)
+    keep = np.isfinite(t) & np.isfinite(values).all(axis=1) & (t <= MAX_BOOT_S)
     keep &= ((values >= low) & (values <= high)).all(axis=1) | ~keep
     if span is not None:
         keep &= (t >= span[0]) & (t <= span[1])
