@@ -1,8 +1,7 @@
 """The smoother's loops compiled by numba: a Python loop over a flight's events cost 138 us
 an event (benchmarks/smoother_bench.py); compiled, with its steps in place, a few.
 
-:func:`compiled` is ``numba.njit`` with its compilation cached on disk (the first run on a
-machine compiles, for some seconds; later ones load it), typed for mypy.
+:func:`compiled` is :func:`altfuse.compiled.compiled` (``numba.njit``, cached on disk).
 
 numba keys a cached function on its own source file only: a kernel in ``passes.py`` compiled
 with the steps of ``kalman.py`` stays cached when only ``kalman.py`` changes, and would run the
@@ -13,13 +12,11 @@ package's sources (:func:`_forget_other_versions`, at import).
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar, cast
 
-import numba
+from altfuse.compiled import compiled
 
-F = TypeVar("F", bound=Callable[..., Any])
+__all__ = ["compiled"]
 
 _HERE = Path(__file__).resolve().parent
 _STAMP = "altfuse-sources.sha256"
@@ -48,8 +45,3 @@ def _forget_other_versions(package: Path = _HERE) -> None:
 
 
 _forget_other_versions()
-
-
-def compiled(function: F) -> F:
-    """``function`` compiled to machine code (nopython mode, cached)."""
-    return cast(F, numba.njit(cache=True)(function))
