@@ -11,6 +11,11 @@ fresh process (so that peak memory is that of the measurement alone):
 - ``altfuse``: ``read_dataflash``, split into the index, the decoding and the file's sha256;
 - ``pymavlink``: a ``recv_match`` loop over the types altfuse reads;
 - ``plain``: one numpy pass over the file's bytes (read them, count the 0xA3 bytes).
+
+With ``--adversarial-mb`` (issue 16), the reader's index on two hostile files beside a clean
+one of the same size (built as above): the source log followed by repeated header bytes
+(``A3 95 80``, FMT's header), and the clean log with a decoy header (``A3 95`` and the
+record's own type) inside every record's payload.
 """
 
 from __future__ import annotations
@@ -67,7 +72,44 @@ def build(source: Path, target: Path, megabytes: float) -> int:
     return target.stat().st_size
 
 
+def hostile(clean: Path, source: Path, folder: Path) -> dict[str, Path]:
+    """The two hostile files of ``clean``'s size (see the module doc)."""
+    size = clean.stat().st_size
+    log = source.read_bytes()[: size // 2]
+    headers = folder / "headers.bin"
+    headers.write_bytes(log + b"\xa3\x95\x80" * ((size - len(log)) // 3))
+    index = index_file(clean)
+    data = np.fromfile(clean, dtype=np.uint8)
+    lengths = np.zeros(256, dtype=np.int64)
+    for type_id, fmt in index.formats.items():
+        lengths[type_id] = fmt.length
+    at = index.offsets.astype(np.int64)
+    at = at[(index.types != 128) & (lengths[index.types] >= 12)]
+    data[at + 5], data[at + 6], data[at + 7] = 0xA3, 0x95, data[at + 2]
+    decoys = folder / "decoys.bin"
+    data.tofile(decoys)
+    return {"repeated header bytes": headers, "decoy headers in payloads": decoys}
+
+
+_WARM = """
+import time, numpy as np
+from altfuse.io.fastdf import index_file, _walk
+from altfuse.io import read_log
+for dtype in (np.int32, np.int64):  # load the compiled walk first: not the file's time
+    _walk(np.zeros(1, dtype=dtype), np.ones(1, dtype=dtype), 1)
+"""
+
 CHILD = {
+    "index": _WARM
+    + """
+t0 = time.perf_counter(); index = index_file(PATH)
+RESULT = {"seconds": time.perf_counter() - t0, "records": int(index.offsets.size)}
+""",
+    "read_log": _WARM
+    + """
+t0 = time.perf_counter(); flight = read_log(PATH)
+RESULT = {"seconds": time.perf_counter() - t0, "sources": len(flight.sensors)}
+""",
     "altfuse": """
 import time, hashlib
 from altfuse.io.fastdf import index_file
@@ -139,7 +181,13 @@ def main() -> None:
     parser.add_argument("--keep", type=Path, help="write the big log here and keep it")
     parser.add_argument("--skip-pymavlink", action="store_true")
     parser.add_argument("--repeat", type=int, default=3, help="runs per measurement (median)")
+    parser.add_argument(
+        "--adversarial-mb", type=float, help="only the hostile files of this size (and a clean one)"
+    )
     args = parser.parse_args()
+    if args.adversarial_mb:
+        adversarial(args.source, args.adversarial_mb, args.repeat)
+        return
     with tempfile.TemporaryDirectory() as tmp:
         path = args.keep or Path(tmp) / "big.bin"
         started = time.perf_counter()
@@ -175,6 +223,28 @@ def main() -> None:
                 f"pymavlink recv_match loop: {theirs['seconds']:.1f} s, "
                 f"{theirs['records']:,} records, peak {theirs['peak_mb']:.0f} MB; altfuse "
                 f"extraction is {theirs['seconds'] / extraction:.0f}x faster"
+            )
+
+
+def adversarial(source: Path, megabytes: float, repeat: int) -> None:
+    """The index's time on the hostile files beside a clean file of the same size."""
+    with tempfile.TemporaryDirectory() as tmp:
+        clean = Path(tmp) / "clean.bin"
+        size = build(source, clean, megabytes)
+        base = median_of(repeat, "index", clean)
+        whole = median_of(repeat, "read_log", clean)
+        print(
+            f"clean {size / 1e6:.1f} MB: index {base['seconds']:.3f} s, read_log "
+            f"{whole['seconds']:.3f} s, {base['records']:,} records, peak {whole['peak_mb']:.0f} MB"
+        )
+        for label, path in hostile(clean, source, Path(tmp)).items():
+            got = median_of(repeat, "index", path)
+            read = median_of(repeat, "read_log", path)
+            print(
+                f"{label} {path.stat().st_size / 1e6:.1f} MB: index {got['seconds']:.3f} s "
+                f"({got['seconds'] / base['seconds']:.1f}x clean), read_log "
+                f"{read['seconds']:.3f} s ({read['seconds'] / whole['seconds']:.1f}x), "
+                f"{got['records']:,} records, peak {read['peak_mb']:.0f} MB"
             )
 
 
