@@ -308,3 +308,25 @@ def test_batch_workers_die_with_their_parent(tmp_path: Path) -> None:
     alive = [w for w in workers if Path(f"/proc/{w}").exists()
              and "zombie" not in Path(f"/proc/{w}/status").read_text()]  # fmt: skip
     assert alive == []
+
+
+def test_a_python_warning_is_never_a_second_stderr_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import warnings
+
+    from altfuse import cli as cli_module
+
+    original = cli_module.fuse_to_files
+
+    def noisy(*args: object, **kwargs: object) -> object:
+        warnings.warn("invalid value encountered in divide", RuntimeWarning, stacklevel=1)
+        return original(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(cli_module, "fuse_to_files", noisy)
+    result = run("fuse", SAMPLE_LOG, "-o", tmp_path / "out.csv")
+    assert result.exit_code == 0
+    assert "RuntimeWarning" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) <= 1  # the sample log's one warning line
+    debug = run("-vv", "fuse", SAMPLE_LOG, "-o", tmp_path / "again.csv")
+    assert "RuntimeWarning: invalid value encountered in divide" in debug.stderr

@@ -15,6 +15,7 @@ import sys
 import time
 import traceback
 import typing
+import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal, NoReturn
@@ -59,6 +60,21 @@ def _fail(message: str, code: int) -> NoReturn:
     sys.exit(code)
 
 
+def _log_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: object = None,  # noqa: ARG001
+    line: str | None = None,  # noqa: ARG001
+) -> None:
+    """A Python warning (numpy on damaged data, a library's deprecation) is for developers:
+    logged at debug level (``-vv`` shows it), never a second line on a user's stderr."""
+    logging.getLogger("altfuse").debug(
+        "%s: %s (%s:%d)", category.__name__, message, filename, lineno
+    )
+
+
 def _fail_signalled(exc: BaseException | None) -> None:
     """Exit as a signal asks (SIGTERM: 143, SIGINT: 130) when ``exc`` is one."""
     if isinstance(exc, Terminated):
@@ -88,7 +104,10 @@ class _Cli(click.Group):
         argv = kwargs.get("args", args[0] if args else None)
         debug = "--debug" in (sys.argv[1:] if argv is None else list(argv))
         try:
-            code = super().main(*args, **kwargs)
+            with warnings.catch_warnings():
+                warnings.simplefilter("always")  # each to the debug log
+                warnings.showwarning = _log_warning
+                code = super().main(*args, **kwargs)
         except (click.exceptions.Abort, KeyboardInterrupt, Terminated) as exc:
             _fail_signalled(exc)
         except click.ClickException as exc:
