@@ -14,7 +14,7 @@ from altfuse.cli import cli
 from altfuse.errors import AltfuseError
 from altfuse.fuse import METHODS, FusionInput
 from altfuse.fuse.base import FusionResult, combine
-from altfuse.guard import FLOOR_M, MIN_S, excursion, guard
+from altfuse.guard import FLOOR_M, GROSS_M, MIN_S, excursion, guard
 from altfuse.metrics import white_noise_sigma
 from altfuse.pipeline import FuseOptions, fuse_log
 from conftest import ROOT, SHARED_LOGS, shared_log
@@ -51,6 +51,15 @@ def test_a_long_excursion_is_flagged_and_a_short_one_is_not() -> None:
     small = guard(shifted(inputs, 100, 200, 0.8 * FLOOR_M), inputs)
     assert small.record["diverged_ticks"] == 0  # below the floor in metres
     assert small.result.status is small.result.status  # nothing to flag: the result as it was
+
+
+def test_a_gross_excursion_is_flagged_however_brief() -> None:
+    inputs = heights()
+    one_tick = guard(shifted(inputs, 299, 300, 1.5 * GROSS_M), inputs)  # at the log's end
+    assert one_tick.record["diverged_ticks"] == 1
+    assert one_tick.result.status[-1] == "diverged"
+    below = guard(shifted(inputs, 299, 300, 0.9 * GROSS_M), inputs)
+    assert below.record["diverged_ticks"] == 0
 
 
 LOGS = [f"ardupilot/{p.name}" for p in sorted((SHARED_LOGS / "ardupilot").glob("*"))] + [

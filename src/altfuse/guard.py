@@ -8,7 +8,9 @@ envelope of the valid sensors' heights (0 inside it)::
 It is too far when it exceeds ``max(FLOOR_M, SIGMAS * sqrt(s^2 + f^2))``, with ``s`` the white
 noise of the sensor at the envelope's nearer edge (from its own samples' second differences) and
 ``f`` the method's own ``fused_std`` where it gives one. A run of such ticks lasting ``MIN_S`` or
-more gets the status ``diverged``: the value is kept (it is what the method said), the status
+more, or with a tick beyond ``GROSS_M`` (a hundred metres outside every sensor is never a
+filter's overshoot, however brief: a GPS's last sample 100 m off at a log's cut), gets the
+status ``diverged``: the value is kept (it is what the method said), the status
 says not to trust it, the provenance counts it and the command line warns in one line.
 """
 
@@ -29,6 +31,8 @@ FLOOR_M = 1.0
 SIGMAS = 3.0
 #: Shortest run of such ticks that is flagged [s]: a filter may overshoot a step for a moment.
 MIN_S = 2.0
+#: An excursion beyond this [m] is flagged whatever its length.
+GROSS_M = 100.0
 
 
 @dataclass(frozen=True)
@@ -61,7 +65,8 @@ def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
     limit = np.maximum(FLOOR_M, SIGMAS * np.sqrt(s**2 + np.nan_to_num(f) ** 2))
     beyond = np.nan_to_num(away) > limit
     long_enough = max(1, round(MIN_S / inputs.dt_s))
-    spans = [(a, b) for a, b in _runs(beyond) if b - a >= long_enough]
+    gross = np.nan_to_num(away) > GROSS_M
+    spans = [(a, b) for a, b in _runs(beyond) if b - a >= long_enough or gross[a:b].any()]
     flagged = np.zeros(fused.size, dtype=bool)
     for a, b in spans:
         flagged[a:b] = True
@@ -69,6 +74,7 @@ def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
         "floor_m": FLOOR_M,
         "sigmas": SIGMAS,
         "min_s": MIN_S,
+        "gross_m": GROSS_M,
         "diverged_ticks": int(flagged.sum()),
         "max_excursion_m": float(np.nanmax(away)) if np.isfinite(away).any() else 0.0,
         "spans_s": [[float(inputs.t[a]), float(inputs.t[b - 1])] for a, b in spans],

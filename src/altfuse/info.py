@@ -11,7 +11,7 @@ import numpy as np
 from altfuse.errors import AltfuseError
 from altfuse.model import FlightLog, Series
 from altfuse.pipeline import FuseOptions, Prepared, prepare
-from altfuse.screen import implausible_count, screen
+from altfuse.screen import implausible_count, screen, screened_out
 
 #: A pause between two samples longer than this counts as a gap [s].
 GAP_S = 1.0
@@ -47,6 +47,9 @@ def damage(flight: FlightLog) -> str | None:
     if implausible:
         per = ", ".join(f"{name} {n}" for name, n in implausible.items())
         parts.append(f"{sum(implausible.values())} implausible samples dropped ({per})")
+    gone = screened_out(flight)
+    if gone:
+        parts.append(f"{', '.join(gone)} left out: no plausible sample")
     return f"{Path(flight.path).name}: " + "; ".join(parts) if parts else None
 
 

@@ -58,6 +58,7 @@ SPIKE = "spike (faster than 50 m/s to both neighbours)"
 BELOW_MINIMUM = "rangefinder at or below its minimum range"
 STUCK = "stuck at one value while the others moved"
 BEYOND_BOOT = "time beyond ten years since boot"
+NO_PLAUSIBLE_SAMPLE = "no plausible sample"
 REASONS = (
     BEYOND_BOOT, BACKWARDS, OUTSIDE_LOG, ENVELOPE, CODE, PINNED, SPIKE, BELOW_MINIMUM, STUCK,
 )  # fmt: skip
@@ -82,6 +83,12 @@ SPIKE_MIN_M = 10.0
 MAX_VERTICAL_SPEED_M_S = 50.0
 TIME_MARGIN_MIN_S = 600.0
 TIME_JUMP_S = 86_400.0
+#: Runs of samples apart by more than CLUSTER_GAP_S [s]; a run of fewer than
+#: CLUSTER_MIN_SAMPLES, or than CLUSTER_MIN_SHARE of the largest, is stray (a barometer whose
+#: stamps were a thousand times too large: one sample every 50 s over 33 h, 2,400 segments).
+CLUSTER_GAP_S = 10.0
+CLUSTER_MIN_SAMPLES = 10
+CLUSTER_MIN_SHARE = 0.01
 MAX_BOOT_S = 10 * 365.25 * 86_400.0
 STUCK_MIN_S = 5.0
 STUCK_MIN_SAMPLES = 10
@@ -104,8 +111,19 @@ def log_span(series: tuple[Series, ...]) -> tuple[float, float] | None:
     times = np.sort(times[np.isfinite(times) & (times <= MAX_BOOT_S)])
     if times.size < 10:
         return None
-    parts = np.split(times, np.flatnonzero(np.diff(times) > TIME_JUMP_S) + 1)
-    times = max(parts, key=len)
+    cut = np.flatnonzero(np.diff(times) > CLUSTER_GAP_S) + 1
+    parts = np.split(times, cut)
+    sizes = np.array([p.size for p in parts])
+    bulk = int(np.argmax(sizes))
+    # out from the largest run of samples, the runs that are not stray ones, until a jump
+    dense = sizes >= max(CLUSTER_MIN_SAMPLES, CLUSTER_MIN_SHARE * sizes[bulk])
+    first = last = bulk
+    while first > 0 and parts[first][0] - parts[first - 1][-1] <= TIME_JUMP_S:
+        first -= 1
+    while last < len(parts) - 1 and parts[last + 1][0] - parts[last][-1] <= TIME_JUMP_S:
+        last += 1
+    times = np.concatenate([p for p, d in zip(parts[first : last + 1], dense[first : last + 1],
+                                              strict=True) if d])  # fmt: skip
     lo, hi = np.percentile(times, [1.0, 99.0])
     margin = max(TIME_MARGIN_MIN_S, 0.5 * (hi - lo))
     return float(lo - margin), float(hi + margin)
@@ -256,7 +274,7 @@ def screen(flight: FlightLog) -> FlightLog:
             sensors.append(screened)
         else:
             reasons = ", ".join(f"{n} {r}" for r, n in screened.dropped.items())
-            dropped_sources[s.name] = f"{s.source}: no plausible sample ({reasons})"
+            dropped_sources[s.name] = f"{s.source}: {NO_PLAUSIBLE_SAMPLE} ({reasons})"
     return screen_inputs(
         replace(
             flight,
@@ -275,7 +293,7 @@ def _keep_rows(
     """The rows (samples) of ``values`` (n, k) at times ``t`` that are finite, within
     [``low``, ``high``] in every column, in time order and inside ``span``; the count of
     the others."""
-    values = values.reshape(t.size, -1)
+    values = values.reshape(t.size, -1) if t.size else np.zeros((0, 1))
     keep = np.isfinite(t) & np.isfinite(values).all(axis=1) & (t <= MAX_BOOT_S)
     keep &= ((values >= low) & (values <= high)).all(axis=1) | ~keep
     if span is not None:
@@ -334,6 +352,11 @@ def screen_inputs(flight: FlightLog, span: tuple[float, float] | None) -> Flight
         temperatures=temperatures,
         dropped_inputs=counts,
     )
+
+
+def screened_out(flight: FlightLog) -> list[str]:
+    """The altitude sources screening left without a sample."""
+    return [name for name, why in flight.dropped_sources.items() if NO_PLAUSIBLE_SAMPLE in why]
 
 
 def implausible_count(flight: FlightLog) -> dict[str, int]:

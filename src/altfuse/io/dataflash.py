@@ -191,6 +191,13 @@ class _Records:
         return self._raw[key]
 
     def text(self, type_name: str, col: str) -> list[str]:
+        """A text field's values; for a field declared as a number, empty strings and a
+        problem."""
+        fmt = self.formats[type_name]
+        char = fmt.format[fmt.columns.index(col)]
+        if char not in "nNZ":
+            self.problems[f"{type_name}.{col}"] = f"declared as a number ({char!r}), not text"
+            return [""] * self.n(type_name)
         return [_text(v) for v in self.table(type_name)[col].tolist()]
 
     def column(self, type_name: str, col: str) -> FloatArray:
