@@ -5,11 +5,16 @@ Run on demand (about 2 minutes for 2,000 variants on 2 cores):
     python tests/fuzz_long.py [--variants 2000] [--seed 1] [--workers 2]
 
 Each variant is a base log (every log in ../shared/logs/ardupilot and sample_logs/) with one to
-three random mutations (tests/fuzzing.py), fused with a random method and written out, in a worker
-process with a 30 s limit per variant and a 4 GiB address-space limit. The allowed outcomes are a
-valid output or a documented error (an ``AltfuseError``); anything else — an unhandled exception,
-a hang, runaway memory — is counted as a failure, printed with the seed that reproduces it, and
-makes the exit code 1.
+three random mutations (tests/fuzzing.py), fused by the command line (``altfuse fuse``, in
+process) with a random method, in a worker process with a 30 s limit per variant and a 4 GiB
+address-space limit. The allowed outcomes are a valid output or a documented error (exit 1 or 2
+with one line on stderr and no file written). Anything else is a failure, printed with the seed
+that reproduces it, and makes the exit code 1: exit 3 (a bug), a hang, runaway memory, a second
+line on stderr (a success may print at most two warning lines: what reading left out, and a
+divergence), a partial output or a temporary file left behind, and in the CSV an infinite
+number, a missing fused value where the status says fused, or a fused value more than 100 m
+outside every sensor (below the lowest or above the highest) at a tick not flagged
+``diverged``.
 """
 
 from __future__ import annotations
@@ -28,19 +33,21 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from altfuse.errors import AltfuseError
-from altfuse.pipeline import FuseOptions, fuse_log
-from altfuse.write import write_outputs
+import pandas as pd
+from click.testing import CliRunner
+
+from altfuse.cli import cli
 from fuzzing import MUTATIONS, Records, variant
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT_S = 30
 MEMORY_BYTES = 4 << 30
-METHODS = ("support", "mean", "delay2", "multilayer")
+METHODS = ("smoother", "support", "mean", "delay2", "multilayer")
+EXCURSION_M = 100.0
 _BASES: dict[str, tuple[bytes, Records]] = {}
 
 
-class Hang(Exception):
+class Hang(BaseException):  # past the command's own handling of Exception
     pass
 
 
@@ -59,23 +66,61 @@ def run_one(base: str, names: list[str], seed: int, method: str) -> tuple[str, s
         _BASES[base] = (Path(base).read_bytes(), Records(Path(base)))
     data, records = _BASES[base]
     with tempfile.TemporaryDirectory() as tmp:
-        log = Path(tmp) / "damaged.bin"
+        log, out = Path(tmp) / "damaged.bin", Path(tmp) / "out.csv"
         log.write_bytes(variant(data, records, names, seed))
         signal.alarm(LIMIT_S)
         try:
-            run = fuse_log(log, FuseOptions(method=method))
-            write_outputs(run, Path(tmp) / "out.csv")
-            return "ok", ""
-        except AltfuseError as exc:
-            return f"error: {type(exc).__name__}", str(exc)[:120]
+            result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), "-m", method])
         except Hang:
             return "FAIL hang", f"over {LIMIT_S} s"
-        except MemoryError:
-            return "FAIL memory", f"over {MEMORY_BYTES >> 30} GiB"
-        except Exception as exc:
-            return f"FAIL {type(exc).__name__}", str(exc)[:200]
         finally:
             signal.alarm(0)
+        if isinstance(result.exception, MemoryError):
+            return "FAIL memory", f"over {MEMORY_BYTES >> 30} GiB"
+        left = sorted(p.name for p in Path(tmp).iterdir())
+        return judge(result.exit_code, result.stderr.strip().splitlines(), out, left)
+
+
+def judge(code: int, lines: list[str], out: Path, left: list[str]) -> tuple[str, str]:
+    """The outcome of one run of the command (see the module doc)."""
+    last = lines[-1][:200] if lines else ""
+    if code == 3:
+        return "FAIL exit 3", last
+    if code != 0:
+        if code not in (1, 2):
+            return f"FAIL exit {code}", last
+        if len(lines) != 1 or not lines[0].startswith("altfuse: error: "):
+            return "FAIL stderr lines", " | ".join(lines)[:200]
+        if left != ["damaged.bin"]:
+            return "FAIL partial output", ", ".join(left)
+        return f"error {code}", last
+    if len(lines) > 2 or not all(line.startswith("altfuse: warning: ") for line in lines):
+        return "FAIL stderr lines", " | ".join(lines)[:200]
+    if left != ["damaged.bin", "out.csv", "out.meta.json"]:
+        return "FAIL stray file", ", ".join(left)
+    return check_csv(pd.read_csv(out))
+
+
+def check_csv(table: pd.DataFrame) -> tuple[str, str]:
+    """A written CSV's values: finite, and near a sensor unless flagged."""
+    numbers = table.select_dtypes("number").to_numpy(dtype=float)
+    if np.isinf(numbers).any():
+        return "FAIL infinite value", ""
+    fused = table["fused_alt_m"].to_numpy(dtype=float)
+    status = table["status"].astype(str).to_numpy()
+    said = np.isin(status, ("fused", "single", "equal"))
+    if np.isnan(fused[said]).any():
+        return "FAIL missing fused value", f"{int(np.isnan(fused[said]).sum())} ticks"
+    sensors = table[[c for c in table.columns if c.startswith("alt_")]].to_numpy(dtype=float)
+    seen = np.isfinite(sensors).any(axis=1)
+    low = np.min(np.where(np.isfinite(sensors), sensors, np.inf), axis=1)
+    high = np.max(np.where(np.isfinite(sensors), sensors, -np.inf), axis=1)
+    outside = np.where(seen, np.maximum(low - fused, fused - high), np.nan)  # beyond every one
+    away = (outside > EXCURSION_M) & (status != "diverged")
+    if away.any():
+        worst = float(np.max(outside[away]))
+        return "FAIL unflagged excursion", f"{int(away.sum())} ticks, up to {worst:.0f} m"
+    return "ok", ""
 
 
 def main() -> int:
@@ -121,7 +166,7 @@ def main() -> int:
         print(f"  {n:6d}  {kind}")
     print("by mutation (a variant has 1-3):")
     for name, counts in by_mutation.items():
-        print(f"  {name:<11}" + ", ".join(f"{k} {v}" for k, v in counts.most_common()))
+        print(f"  {name:<13}" + ", ".join(f"{k} {v}" for k, v in counts.most_common()))
     for job, kind, detail in failures[:20]:
         print(
             f"{kind}: base={Path(job[0]).name} mutations={job[1]} seed={job[2]} "

@@ -1,8 +1,13 @@
 """Damaged variants of real logs, for the property test and the long fuzz run.
 
 Every mutation takes a log's bytes and returns damaged bytes: truncation, byte flips, zeroed and
-duplicated blocks, records shuffled, FMT records removed, garbage inserted. Record boundaries come
-from altfuse's own index of the (undamaged) base log.
+duplicated blocks, records shuffled, FMT records removed, garbage inserted; and, record-aware
+(issue 16): a type redefined mid-file, FMT records with absurd lengths and format characters,
+Columns lists that do not match, a field's type changed, non-finite and extreme values in any
+numeric field, 14 kinds of timestamp damage, and values frozen over a run of records. Record
+boundaries and layouts come from altfuse's own index of the (undamaged) base log; the
+record-aware mutations apply to the base log's bytes (run them first: a mutation before them
+would move the records).
 """
 
 from __future__ import annotations
@@ -12,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from altfuse.io.fastdf import FMT_TYPE, index_file
+from altfuse.io.fastdf import FMT_TYPE, Format, index_file
+from altfuse.io.framing import HEADER
 
 Mutation = Callable[[bytes, np.random.Generator, "Records"], bytes]
 
@@ -28,9 +34,28 @@ class Records:
     def __init__(self, path: Path) -> None:
         index = index_file(path)
         lengths = {t: f.length for t, f in index.formats.items()}
+        self.size = index.size
         self.starts = index.offsets.astype(np.int64)
         self.types = index.types
         self.ends = self.starts + np.array([lengths[t] for t in self.types.tolist()], np.int64)
+        self.formats: dict[int, Format] = {
+            t: f for t, f in index.formats.items() if t != FMT_TYPE and np.any(self.types == t)
+        }
+
+    def fields(self, rng: np.random.Generator, numeric: bool = True) -> tuple[Format, str]:
+        """A random type of the log and one of its (numeric) fields."""
+        choices = [
+            (f, name)
+            for f in self.formats.values()
+            for name, char in zip(f.columns, f.format, strict=True)
+            if not numeric or char not in "nNZa"
+        ]
+        return choices[int(rng.integers(len(choices)))]
+
+    def offsets_of(self, fmt: Format, name: str) -> np.ndarray:
+        """Where field ``name`` of every record of ``fmt`` starts in the file."""
+        at = self.starts[(self.types == fmt.type_id) & (self.ends <= self.size)]
+        return at + HEADER + int(fmt.dtype.fields[name][1])  # type: ignore[index]
 
 
 def truncate(data: bytes, rng: np.random.Generator, _: Records) -> bytes:
@@ -91,6 +116,205 @@ def insert_garbage(data: bytes, rng: np.random.Generator, _: Records) -> bytes:
     return data[:at] + junk + data[at:]
 
 
+FMT_FIELDS = {"type": 3, "length": 4, "name": slice(5, 9), "format": slice(9, 25),
+              "columns": slice(25, 89)}  # fmt: skip
+_FORMATS_BY_SIZE = {1: "bB", 2: "hHc", 4: "iIfnLeE", 8: "qQd"}
+
+
+def _fmt_at(data: bytes, rng: np.random.Generator, rec: Records) -> int | None:
+    """The offset of a random FMT record of one of the log's types."""
+    fmts = [
+        int(s)
+        for s in rec.starts[rec.types == FMT_TYPE].tolist()
+        if data[s + 3] in rec.formats and s + 89 <= len(data)
+    ]
+    return fmts[int(rng.integers(len(fmts)))] if fmts else None
+
+
+def _put(out: bytearray, at: int, where: slice, text: bytes) -> None:
+    width = where.stop - where.start
+    out[at + where.start : at + where.stop] = text.ljust(width, b"\0")[:width]
+
+
+def _relabelled(record: bytes, rng: np.random.Generator) -> bytes:
+    """A FMT record with its Columns list damaged as the audit saw."""
+    out = bytearray(record)
+    cols = bytes(out[25:89]).rstrip(b"\0").split(b",")
+    kind = int(rng.integers(5))
+    if kind == 0:
+        cols = [b"", *cols]  # a leading comma
+    elif kind == 1 and len(cols) > 1:
+        cols[0], cols[1] = cols[1], cols[0]  # TimeUS and the next swapped
+    elif kind == 2:
+        cols = [*cols, b"Extra"]
+    elif kind == 3 and len(cols) > 1:
+        cols[-1] = cols[0]  # a repeated name
+    else:
+        cols = cols[: int(rng.integers(len(cols)))]
+    _put(out, 0, FMT_FIELDS["columns"], b",".join(cols))  # type: ignore[arg-type]
+    return bytes(out)
+
+
+def fmt_columns(data: bytes, rng: np.random.Generator, rec: Records) -> bytes:
+    at = _fmt_at(data, rng, rec)
+    if at is None:
+        return data
+    return data[:at] + _relabelled(data[at : at + 89], rng) + data[at + 89 :]
+
+
+def fmt_absurd(data: bytes, rng: np.random.Generator, rec: Records) -> bytes:
+    """A FMT's Length a random byte, or its format string random characters."""
+    at = _fmt_at(data, rng, rec)
+    if at is None:
+        return data
+    out = bytearray(data)
+    if rng.random() < 0.5:
+        out[at + 4] = int(rng.integers(256))
+    else:
+        n = int(rng.integers(1, 17))
+        chars = bytes(rng.integers(32, 127, n, dtype=np.uint8))
+        _put(out, at, FMT_FIELDS["format"], chars)  # type: ignore[arg-type]
+    return bytes(out)
+
+
+def fmt_type_change(data: bytes, rng: np.random.Generator, rec: Records) -> bytes:
+    """One format character replaced by another of the same size (a number declared as
+    text, an integer as a float)."""
+    at = _fmt_at(data, rng, rec)
+    if at is None:
+        return data
+    out = bytearray(data)
+    fmt = bytes(out[at + 9 : at + 25]).rstrip(b"\0").decode("latin-1")
+    i = int(rng.integers(len(fmt))) if fmt else 0
+    for chars in _FORMATS_BY_SIZE.values():
+        if fmt and fmt[i] in chars:
+            others = [c for c in chars if c != fmt[i]]
+            fmt = fmt[:i] + others[int(rng.integers(len(others)))] + fmt[i + 1 :]
+            break
+    _put(out, at, FMT_FIELDS["format"], fmt.encode("latin-1"))  # type: ignore[arg-type]
+    return bytes(out)
+
+
+def fmt_redefine(data: bytes, rng: np.random.Generator, rec: Records) -> bytes:
+    """A type's FMT again, changed, at a record boundary later in the file."""
+    at = _fmt_at(data, rng, rec)
+    if at is None:
+        return data
+    again = _relabelled(data[at : at + 89], rng)
+    later = rec.starts[rec.starts > at]
+    where = int(later[int(rng.integers(later.size))]) if later.size else len(data)
+    return data[:where] + again + data[where:]
+
+
+_EXTREMES = (np.nan, np.inf, -np.inf, 1e38, -1e38, 3.4e38, 1e6, 0.0)
+
+
+def extreme_values(data: bytes, rng: np.random.Generator, rec: Records) -> bytes:
+    """A numeric field of one, some or all records of a type set to a non-finite or extreme
+    value (for an integer field, its extremes)."""
+    if not rec.formats:
+        return data
+    fmt, name = rec.fields(rng)
+    where = rec.offsets_of(fmt, name)
+    if where.size == 0:
+        return data
+    share = (1.0, 0.1, 0.0)[int(rng.integers(3))]
+    hit = where[rng.random(where.size) < share] if share else where[[int(rng.integers(where.size))]]
+    dtype = fmt.dtype.fields[name][0]  # type: ignore[index]
+    if dtype.kind == "f":
+        value = np.array(_EXTREMES[int(rng.integers(len(_EXTREMES)))]).astype(dtype)
+    else:
+        info = np.iinfo(dtype)
+        value = np.array((info.max, info.min)[int(rng.integers(2))], dtype=dtype)
+    out = np.frombuffer(data, np.uint8).copy()
+    raw = np.frombuffer(value.tobytes(), np.uint8)
+    out[hit[:, None] + np.arange(raw.size)] = raw
+    return out.tobytes()
+
+
+_DAY_US = np.uint64(86_400_000_000)
+_U = np.uint64
+
+
+def _wrap32(t: np.ndarray, k: int) -> np.ndarray:
+    out = t.copy()
+    out[k:] = (t[k:] + _U(2**32 - int(t[k]) % 2**32)) % _U(2**32)
+    return out
+
+
+def _suffix(t: np.ndarray, k: int, value: np.ndarray | np.uint64) -> np.ndarray:
+    out = t.copy()
+    out[k:] = value
+    return out
+
+
+def _one_ahead(t: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+    out = t.copy()
+    out[k] += _U(3_600_000_000 * int(rng.integers(1, 48)))
+    return out
+
+
+#: 14 kinds of damage to a type's TimeUS values (uint64 microseconds): (t, k, rng) -> t, with
+#: k a random record.
+TIME_DAMAGE: tuple[Callable[[np.ndarray, int, np.random.Generator], np.ndarray], ...] = (
+    lambda t, k, rng: _suffix(t, k, t[k:] + _DAY_US * _U(rng.integers(1, 30))),  # days ahead
+    lambda t, k, _: _suffix(t, k, t[k:] // _U(1000)),  # back before the log
+    lambda t, _k, _: np.zeros_like(t),  # all zero
+    lambda t, _k, _: t + _U(2**63),  # near 2^63
+    lambda t, k, _: _suffix(t, k, _U(2**64 - 1)),  # the maximum
+    lambda t, _k, rng: rng.integers(0, 2**62, t.size, dtype=np.uint64),  # random
+    lambda t, _k, _: t[::-1].copy(),  # reversed
+    _one_ahead,  # one record hours ahead
+    lambda t, k, _: np.full_like(t, t[k]),  # frozen
+    lambda t, _k, _: t // _U(1000),  # milliseconds where microseconds belong
+    lambda t, _k, _: t * _U(1000),  # a thousand times too large
+    lambda t, _k, rng: np.maximum(
+        t.astype(np.int64) + rng.integers(-1_000_000, 1_000_000, t.size), 0
+    ).astype(np.uint64),  # a second of jitter
+    lambda t, k, _: _wrap32(t, k),  # a 32-bit wrap
+    lambda t, _k, _: np.repeat(t[::2], 2)[: t.size],  # every other stamp repeated
+)
+
+
+def timestamps(data: bytes, rng: np.random.Generator, rec: Records) -> bytes:
+    timed = [f for f in rec.formats.values() if f.columns[:1] == ("TimeUS",) and f.format[0] == "Q"]
+    if not timed:
+        return data
+    fmt = timed[int(rng.integers(len(timed)))]
+    where = rec.offsets_of(fmt, "TimeUS")
+    if where.size == 0:
+        return data
+    out = np.frombuffer(data, np.uint8).copy()
+    cells = where[:, None] + np.arange(8)
+    t = out[cells].copy().view("<u8").ravel()
+    damage = TIME_DAMAGE[int(rng.integers(len(TIME_DAMAGE)))]
+    out[cells] = damage(t, int(rng.integers(t.size)), rng).view(np.uint8).reshape(-1, 8)
+    return out.tobytes()
+
+
+def frozen(data: bytes, rng: np.random.Generator, rec: Records) -> bytes:
+    """A numeric field holding one value over a run of records (a frozen driver)."""
+    if not rec.formats:
+        return data
+    fmt, name = rec.fields(rng)
+    if name == "TimeUS":
+        return data
+    where = rec.offsets_of(fmt, name)
+    if where.size < 2:
+        return data
+    a = int(rng.integers(where.size - 1))
+    b = int(rng.integers(a + 1, where.size + 1))
+    width = fmt.dtype.fields[name][0].itemsize  # type: ignore[index]
+    out = np.frombuffer(data, np.uint8).copy()
+    first = out[where[a] : where[a] + width].copy()
+    out[where[a:b, None] + np.arange(width)] = first
+    return out.tobytes()
+
+
+#: The mutations that need the base log's record layout untouched (applied first).
+RECORD_AWARE = ("extreme", "timestamps", "frozen", "fmt-type", "fmt-absurd", "fmt-columns",
+                "fmt-redefine")  # fmt: skip
+
 MUTATIONS: dict[str, Mutation] = {
     "truncate": truncate,
     "flip": flip_bytes,
@@ -99,12 +323,23 @@ MUTATIONS: dict[str, Mutation] = {
     "shuffle": shuffle_records,
     "remove-fmt": remove_fmt,
     "garbage": insert_garbage,
+    "extreme": extreme_values,
+    "timestamps": timestamps,
+    "frozen": frozen,
+    "fmt-type": fmt_type_change,
+    "fmt-absurd": fmt_absurd,
+    "fmt-columns": fmt_columns,
+    "fmt-redefine": fmt_redefine,
 }
 
 
 def variant(base: bytes, records: Records, names: list[str], seed: int) -> bytes:
     rng = np.random.default_rng(seed)
     data = base
-    for name in names:
+    order = sorted(
+        names,
+        key=lambda n: (n not in RECORD_AWARE, RECORD_AWARE.index(n) if n in RECORD_AWARE else 0),
+    )
+    for name in order:
         data = MUTATIONS[name](data, rng, records)
     return data
