@@ -9,12 +9,14 @@ import tempfile
 from pathlib import Path
 
 import pandas as pd
+import pytest
 from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from altfuse.cli import cli
-from conftest import ROOT, SHARED_LOGS
+from conftest import ROOT, SHARED_LOGS, shared_log
+from fuzz_long import judge
 from fuzzing import MUTATIONS, Records, variant
 
 BASES = [ROOT / "sample_logs" / "paper_a.bin"] + [
@@ -54,3 +56,35 @@ def test_damaged_logs_never_crash(which: Path, names: list[str], seed: int, meth
             assert result.stderr.count("\n") == 1
             assert result.stderr.startswith("altfuse: error: ")
             assert not out.exists()
+
+
+#: Variants the long run found failing (exit 3, a 47 s run, an unflagged excursion), kept as
+#: regressions: base log, mutations, seed, method.
+FOUND = [
+    ("hover.bin", ["fmt-columns", "extreme", "fmt-columns"], 3829869885, "delay2"),
+    ("paper_a.bin", ["fmt-columns"], 3342175815, "multilayer"),
+    ("mission.bin", ["fmt-type", "timestamps", "fmt-columns"], 3558445480, "delay2"),
+    ("mission_faults.bin", ["zero"], 937762074, "delay2"),
+    ("mission_faults.bin", ["fmt-type", "flip"], 3805302207, "delay2"),
+    ("mission_faults.bin", ["fmt-absurd", "fmt-type"], 954682890, "smoother"),
+    ("pymavlink_test.BIN", ["timestamps"], 3618519030, "delay2"),
+]
+
+
+@pytest.mark.parametrize(("name", "names", "seed", "method"), FOUND)
+def test_variants_the_long_run_found(name: str, names: list[str], seed: int, method: str) -> None:
+    path = ROOT / "sample_logs" / name
+    if not path.exists():
+        path = shared_log(f"ardupilot/{name}")
+    data, records = base(path)
+    with tempfile.TemporaryDirectory() as tmp:
+        log, out = Path(tmp) / "damaged.bin", Path(tmp) / "out.csv"
+        log.write_bytes(variant(data, records, names, seed))
+        result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), "-m", method])
+        kind, detail = judge(
+            result.exit_code,
+            result.stderr.strip().splitlines(),
+            out,
+            sorted(p.name for p in Path(tmp).iterdir()),
+        )
+        assert not kind.startswith("FAIL"), (kind, detail)

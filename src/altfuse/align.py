@@ -245,7 +245,9 @@ def estimate_lag(series: Series, reference: Series) -> Lag:
     if t.size < 10 or rt.size < 10:
         return none
     step = float(np.median(np.diff(t)))
-    k = max(1, round(LAG_SPAN_S / step)) if step > 0 else 1
+    if not step > 1e-6:  # stamps a microsecond apart, or garbage
+        return none
+    k = max(1, round(LAG_SPAN_S / step))
     if t.size <= k:
         return none
     apart = (t[k:] - t[:-k]) <= 1.5 * LAG_SPAN_S  # no gap between the two samples

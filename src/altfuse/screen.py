@@ -117,6 +117,7 @@ def log_span(series: tuple[Series, ...]) -> tuple[float, float] | None:
     bulk = int(np.argmax(sizes))
     # out from the largest run of samples, the runs that are not stray ones, until a jump
     dense = sizes >= max(CLUSTER_MIN_SAMPLES, CLUSTER_MIN_SHARE * sizes[bulk])
+    dense[bulk] = True  # the largest, however small
     first = last = bulk
     while first > 0 and parts[first][0] - parts[first - 1][-1] <= TIME_JUMP_S:
         first -= 1
