@@ -362,9 +362,10 @@ def fuse(
         logging.getLogger("altfuse").warning("%s", warning)
     record = run.provenance["guard"]
     if record["diverged_ticks"]:
+        lost = f", {record['lost_ticks']} of them without a value" if record["lost_ticks"] else ""
         logging.getLogger("altfuse").warning(
-            "%s: %s left every sensor on %d ticks (by up to %.1f m): status 'diverged'",
-            log.name, method, record["diverged_ticks"], record["max_excursion_m"],
+            "%s: %s left every sensor on %d ticks (by up to %.1f m%s): status 'diverged'",
+            log.name, method, record["diverged_ticks"], record["max_excursion_m"], lost,
         )  # fmt: skip
     counts = run.provenance["status_counts"]
     click.echo(

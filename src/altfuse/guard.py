@@ -10,8 +10,10 @@ noise of the sensor at the envelope's nearer edge (from its own samples' second 
 ``f`` the method's own ``fused_std`` where it gives one. A run of such ticks lasting ``MIN_S`` or
 more, or with a tick beyond ``GROSS_M`` (a hundred metres outside every sensor is never a
 filter's overshoot, however brief: a GPS's last sample 100 m off at a log's cut), gets the
-status ``diverged``: the value is kept (it is what the method said), the status
-says not to trust it, the provenance counts it and the command line warns in one line.
+status ``diverged``; so does a tick where a sensor is valid and the method gave no value at
+all (NaN: the smoother's state lost over a day's gap in a damaged log's stamps). The value is
+kept (it is what the method said), the status says not to trust it, the provenance counts it
+and the command line warns in one line.
 """
 
 from __future__ import annotations
@@ -67,7 +69,8 @@ def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
     long_enough = max(1, round(MIN_S / inputs.dt_s))
     gross = np.nan_to_num(away) > GROSS_M
     spans = [(a, b) for a, b in _runs(beyond) if b - a >= long_enough or gross[a:b].any()]
-    flagged = np.zeros(fused.size, dtype=bool)
+    lost = np.isfinite(z).any(axis=1) & ~np.isfinite(fused)
+    flagged = lost.copy()
     for a, b in spans:
         flagged[a:b] = True
     record = {
@@ -76,6 +79,7 @@ def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
         "min_s": MIN_S,
         "gross_m": GROSS_M,
         "diverged_ticks": int(flagged.sum()),
+        "lost_ticks": int(lost.sum()),
         "max_excursion_m": float(np.nanmax(away)) if np.isfinite(away).any() else 0.0,
         "spans_s": [[float(inputs.t[a]), float(inputs.t[b - 1])] for a, b in spans],
     }

@@ -172,9 +172,12 @@ def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) 
         return np.full(z.size, measurement_sigma(z))
     d2 = np.abs(np.diff(z, 2))
     d2 = np.concatenate(([d2[0]], d2, [d2[-1]]))
-    width = max(5, round(window_s / float(np.median(np.diff(t)) or 1.0)))
+    step = float(np.median(np.diff(t)))
+    # stamps microseconds apart (damaged) must not ask for a window longer than the samples
+    width = min(z.size, max(5, round(window_s / step))) if step > 0 else z.size
     med = pd.Series(d2).rolling(width, center=True, min_periods=3).median().to_numpy()
-    return np.asarray(np.maximum(MAD_TO_SIGMA * med / math.sqrt(6.0), _MIN_SIGMA_M))
+    sigma = np.where(np.isfinite(med), MAD_TO_SIGMA * med / math.sqrt(6.0), measurement_sigma(z))
+    return np.asarray(np.maximum(sigma, _MIN_SIGMA_M))
 
 
 def terrain_noise(d: FloatArray, flown: FloatArray, lag: int, noise_m2: float) -> float:
@@ -337,4 +340,7 @@ def em_scale(ev: Events, layout: Layout, noise: Noise, out: dict[str, np.ndarray
         )
         resid = ev.z[mine] - np.einsum("ka,ka->k", coef, xs[mine][:, cols])
         var_h = np.einsum("ka,kab,kb->k", coef, ps[mine][:, cols][:, :, cols], coef)
-        noise.scale[i] = max(float(np.mean((resid**2 + var_h) / noise.base[mine])), 1e-4)
+        ratio = (resid**2 + var_h) / noise.base[mine]
+        ratio = ratio[np.isfinite(ratio)]  # a state the filter lost (damaged stamps) says nothing
+        if ratio.size:
+            noise.scale[i] = max(float(np.mean(ratio)), 1e-4)
