@@ -6,7 +6,10 @@ output folder mirroring the input tree, and a ``summary.csv``. One bad log never
 its row says why it failed. Logs run in local processes (``jobs``) or on a Dask cluster
 (``scheduler``); every log's outputs are the same bytes either way.
 
-Resuming: temporary files left by an interrupted run are removed at the start; with
+One batch at a time writes to an output folder (a lock on the folder); an existing
+``summary.csv`` is merged with this run's rows unless ``force``. Workers end with their parent.
+
+Resuming: altfuse's temporary files left by an interrupted run are removed at the start; with
 ``skip_existing``, a log whose provenance sidecar exists, names the input's current
 sha256 and the same options, and whose listed outputs all exist, is not run again. Each log's
 outputs are written all-or-nothing with the sidecar renamed last, so an interrupted batch leaves

@@ -1,7 +1,9 @@
 """Writing a run's outputs: the fused CSV, the weight traces, the JSON provenance sidecar.
 
 Every file is written to a temporary file beside its target and renamed into place only when all
-of them are complete, so a failure never leaves a half-written output behind.
+of them are complete, all or none, so a failure never leaves a half-written output or an output
+without its sidecar behind; no output may be an input of the run or another of its outputs
+(:func:`check_paths`); SIGTERM, like SIGINT, removes the temporary files (:class:`Terminated`).
 """
 
 from __future__ import annotations
