@@ -5,6 +5,8 @@ records it finds are the log's, in time linear in the file (measured in
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -55,3 +57,21 @@ def test_a_run_of_zeros_after_the_log_is_skipped_bytes(tmp_path: Path) -> None:
     flight = read_log(path)
     assert flight.skipped_bytes == 200 * 2**20 - SAMPLE_LOG.stat().st_size
     same_sensors(path, SAMPLE_LOG)
+
+
+def test_a_log_that_shrinks_while_mapped_is_one_line_not_a_silent_death(tmp_path: Path) -> None:
+    path = tmp_path / "shrinking.bin"
+    path.write_bytes(SAMPLE_LOG.read_bytes() * 40)
+    code = (
+        "import os, sys\n"
+        "from altfuse.io.fastdf import index_file\n"
+        f"index = index_file({str(path)!r})\n"
+        f"os.truncate({str(path)!r}, 4096)  # another process cuts the log\n"
+        "print(int(index.data[-1000:].sum()))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert done.returncode == 1, done
+    assert done.stderr == (
+        "altfuse: error: the log shrank while it was being read (SIGBUS); read it again\n"
+    )
+    assert done.stdout == ""

@@ -30,7 +30,10 @@ cannot hold both, so it is refused, with the reason).
 
 from __future__ import annotations
 
+import ctypes
 import mmap
+import os
+import signal
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -242,8 +245,38 @@ def _walk(
     return alive
 
 
+#: SIGBUS comes when a mapped file shrinks under the reader (a log truncated while it is read):
+#: the page is gone and the access cannot complete. Python cannot handle it (its handlers run
+#: after the faulting access, which repeats), so a C-level handler says so in one line and ends
+#: the process with exit 1, where it died silently before.
+_SIGBUS_LINE = b"altfuse: error: the log shrank while it was being read (SIGBUS); read it again\n"
+_HANDLER = ctypes.CFUNCTYPE(None, ctypes.c_int)
+_installed: list[Any] = []  # the handler, kept alive once installed
+
+
+def _on_sigbus(_signum: int) -> None:
+    os.write(2, _SIGBUS_LINE)
+    os._exit(1)
+
+
+def exit_on_sigbus() -> None:
+    """Install the SIGBUS handler (see ``_SIGBUS_LINE``), once per process, where libc has one."""
+    if _installed or not hasattr(signal, "SIGBUS"):
+        return
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.signal.restype = ctypes.c_void_p
+        libc.signal.argtypes = [ctypes.c_int, _HANDLER]
+    except (OSError, AttributeError):
+        return
+    handler = _HANDLER(_on_sigbus)
+    libc.signal(signal.SIGBUS, handler)
+    _installed.append(handler)
+
+
 def index_file(path: str | Path) -> Index:
     """Map ``path`` read-only and find its records as pymavlink's sequential parser would."""
+    exit_on_sigbus()
     with Path(path).open("rb") as handle:
         size = handle.seek(0, 2)
         if size == 0:
