@@ -330,3 +330,25 @@ def test_a_python_warning_is_never_a_second_stderr_line(
     assert len(result.stderr.strip().splitlines()) <= 1  # the sample log's one warning line
     debug = run("-vv", "fuse", SAMPLE_LOG, "-o", tmp_path / "again.csv")
     assert "RuntimeWarning: invalid value encountered in divide" in debug.stderr
+
+
+def dying(job: batch_module.Job, options: BatchOptions) -> batch_module.LogResult:
+    """A worker's job that ends its process on ``b.bin``, as the SIGBUS handler would."""
+    if job.log.name == "b.bin":
+        os._exit(1)
+    return batch_module.process(job, options)
+
+
+def test_a_worker_that_dies_is_a_failed_row_not_a_crashed_batch(tmp_path: Path) -> None:
+    logs = copies(tmp_path / "logs", "a.bin", "b.bin", "c.bin")
+    original = batch_module._process_in_worker
+    batch_module._process_in_worker = dying  # type: ignore[assignment]
+    try:
+        results = run_batch([logs], tmp_path / "out", jobs=2)
+    finally:
+        batch_module._process_in_worker = original  # type: ignore[assignment]
+    by_log = {r.log: r for r in results}
+    assert set(by_log) == {"a.bin", "b.bin", "c.bin"}  # a row each, whatever the pool did
+    assert by_log["b.bin"].status == "failed"
+    assert "a worker process died" in by_log["b.bin"].error
+    assert pd.read_csv(tmp_path / "out" / "summary.csv")["log"].tolist() == sorted(by_log)

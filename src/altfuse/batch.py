@@ -29,6 +29,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal, get_args
@@ -274,9 +275,14 @@ def _local(jobs: list[Job], options: BatchOptions, workers: int) -> Iterator[Log
     with ProcessPoolExecutor(
         max_workers=workers, initializer=_worker_start, initargs=(os.getpid(),)
     ) as pool:
-        futures = [pool.submit(_process_in_worker, job, options) for job in jobs]
+        futures = {pool.submit(_process_in_worker, job, options): job for job in jobs}
         for future in as_completed(futures):
-            yield future.result()
+            try:
+                yield future.result()
+            except BrokenProcessPool:  # a worker died (SIGBUS: a log shrank while read)
+                name = printable(str(futures[future].relative))
+                why = "not finished: a worker process died (a log that shrank while read?)"
+                yield LogResult(name, "failed", why)
 
 
 def _dask(jobs: list[Job], options: BatchOptions, scheduler: str) -> Iterator[LogResult]:
