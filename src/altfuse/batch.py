@@ -41,7 +41,13 @@ from altfuse.io import sha256_of
 from altfuse.job import Outputs, fuse_to_files
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
-from altfuse.write import Terminated, atomic_outputs, interruption, remove_stale_temporaries
+from altfuse.write import (
+    EXIT_TERMINATED,
+    Terminated,
+    atomic_outputs,
+    interruption,
+    remove_stale_temporaries,
+)
 
 SUMMARY = "summary.csv"
 _PR_SET_PDEATHSIG = 1
@@ -222,9 +228,6 @@ def process(job: Job, options: BatchOptions) -> LogResult:
         return LogResult(name, "failed", message, time.perf_counter() - started)
 
 
-_EXIT_TERMINATED = 128 + signal.SIGTERM
-
-
 @dataclass
 class _WorkerState:
     """What a worker process's SIGTERM handler needs to know."""
@@ -240,7 +243,7 @@ def _worker_signal(_signum: int, _frame: object) -> None:
     _worker.terminating = True
     if _worker.running:
         raise Terminated  # out through atomic_outputs, which removes its temporary files
-    os._exit(_EXIT_TERMINATED)
+    os._exit(EXIT_TERMINATED)
 
 
 def _worker_start(parent: int) -> None:
@@ -252,7 +255,7 @@ def _worker_start(parent: int) -> None:
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
     if os.getppid() != parent:  # it died before the request above was made
-        os._exit(_EXIT_TERMINATED)
+        os._exit(EXIT_TERMINATED)
 
 
 def _process_in_worker(job: Job, options: BatchOptions) -> LogResult:
@@ -260,11 +263,11 @@ def _process_in_worker(job: Job, options: BatchOptions) -> LogResult:
     try:
         return process(job, options)
     except Terminated:
-        os._exit(_EXIT_TERMINATED)
+        os._exit(EXIT_TERMINATED)
     finally:
         _worker.running = False
         if _worker.terminating:  # the signal's exception was swallowed (numba's cache callback)
-            os._exit(_EXIT_TERMINATED)
+            os._exit(EXIT_TERMINATED)
 
 
 def _local(jobs: list[Job], options: BatchOptions, workers: int) -> Iterator[LogResult]:

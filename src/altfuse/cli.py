@@ -38,6 +38,7 @@ from altfuse.pipeline import FuseOptions
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
 from altfuse.write import (
+    EXIT_TERMINATED,
     Terminated,
     atomic_outputs,
     check_paths,
@@ -78,7 +79,7 @@ def _log_warning(
 def _fail_signalled(exc: BaseException | None) -> None:
     """Exit as a signal asks (SIGTERM: 143, SIGINT: 130) when ``exc`` is one."""
     if isinstance(exc, Terminated):
-        _fail("terminated", 128 + signal.SIGTERM)
+        _fail("terminated", EXIT_TERMINATED)
     if exc is not None:
         _fail("interrupted", 128 + signal.SIGINT)
 

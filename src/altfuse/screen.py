@@ -123,8 +123,7 @@ def log_span(series: tuple[Series, ...]) -> tuple[float, float] | None:
         first -= 1
     while last < len(parts) - 1 and parts[last + 1][0] - parts[last][-1] <= TIME_JUMP_S:
         last += 1
-    times = np.concatenate([p for p, d in zip(parts[first : last + 1], dense[first : last + 1],
-                                              strict=True) if d])  # fmt: skip
+    times = np.concatenate([parts[i] for i in range(first, last + 1) if dense[i]])
     lo, hi = np.percentile(times, [1.0, 99.0])
     margin = max(TIME_MARGIN_MIN_S, 0.5 * (hi - lo))
     return float(lo - margin), float(hi + margin)
@@ -295,8 +294,8 @@ def _keep_rows(
     [``low``, ``high``] in every column, in time order and inside ``span``; the count of
     the others."""
     values = values.reshape(t.size, -1) if t.size else np.zeros((0, 1))
-    keep = np.isfinite(t) & np.isfinite(values).all(axis=1) & (t <= MAX_BOOT_S)
-    keep &= ((values >= low) & (values <= high)).all(axis=1) | ~keep
+    keep = np.isfinite(t) & (t <= MAX_BOOT_S)  # a NaN value fails the range test below
+    keep &= ((values >= low) & (values <= high)).all(axis=1)
     if span is not None:
         keep &= (t >= span[0]) & (t <= span[1])
     kept = np.flatnonzero(keep)

@@ -124,6 +124,10 @@ def remove_stale_temporaries(folder: Path, name: str = "*", recursive: bool = Fa
     return removed
 
 
+#: The exit code after SIGTERM (128 + the signal, as a shell reports it).
+EXIT_TERMINATED = 128 + signal.SIGTERM
+
+
 class Terminated(BaseException):
     """SIGTERM, raised where the process is (as SIGINT raises KeyboardInterrupt), so that the
     temporary files of :func:`atomic_outputs` are removed on the way out."""

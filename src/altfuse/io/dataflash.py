@@ -64,8 +64,9 @@ _OTHER_TYPES = (
 )  # fmt: skip
 WANTED_TYPES = frozenset(_SENSOR_TYPES + _OTHER_TYPES)
 
-#: Format characters of text and arrays: never a number.
-_TEXT_CHARS = frozenset("nNZa")
+#: Format characters of text, and of text and arrays: never a number.
+_TEXT_CHARS = frozenset("nNZ")
+_NOT_NUMBERS = _TEXT_CHARS | {"a"}
 #: The most instances of one sensor type ArduPilot logs (RNGFND_MAX_INSTANCES is 10).
 MAX_INSTANCES = 10
 #: Format characters whose scale pymavlink applies itself.
@@ -181,21 +182,23 @@ class _Records:
         per column (each instance of a type asks for its times again). Do not modify it."""
         key = (type_name, col)
         if key not in self._raw:
-            fmt = self.formats[type_name]
-            char = fmt.format[fmt.columns.index(col)]
-            if char in _TEXT_CHARS:  # a number declared as text: no number to read
+            char = self.format_char(type_name, col)
+            if char in _NOT_NUMBERS:  # a number declared as text: no number to read
                 self.problems[f"{type_name}.{col}"] = f"declared as text ({char!r}), not a number"
                 self._raw[key] = np.full(self.n(type_name), np.nan)
             else:
                 self._raw[key] = _scaled(self.table(type_name)[col], char)
         return self._raw[key]
 
+    def format_char(self, type_name: str, col: str) -> str:
+        fmt = self.formats[type_name]
+        return fmt.format[fmt.columns.index(col)]
+
     def text(self, type_name: str, col: str) -> list[str]:
         """A text field's values; for a field declared as a number, empty strings and a
         problem."""
-        fmt = self.formats[type_name]
-        char = fmt.format[fmt.columns.index(col)]
-        if char not in "nNZ":
+        char = self.format_char(type_name, col)
+        if char not in _TEXT_CHARS:
             self.problems[f"{type_name}.{col}"] = f"declared as a number ({char!r}), not text"
             return [""] * self.n(type_name)
         return [_text(v) for v in self.table(type_name)[col].tolist()]
