@@ -36,6 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SOURCE = (
     ROOT.parent / "shared" / "logs" / "ardupilot" / ("beastayyg_log_0036_mechanical_failure.bin")
 )
+SMALL = ROOT / "sample_logs" / "mission.bin"  # loads the compiled loops before a measurement
 ONCE = {"FMT", "FMTU", "UNIT", "MULT", "PARM"}
 TYPES = ["GPS", "GPS2", "BARO", "BAR2", "RFND", "SONR", "CTUN", "IMU", "ATT", "XKF1", "NKF1",
          "ORGN", "AHR2", "POS", "SIM", "MSG", "VER", "FMTU"]  # fmt: skip
@@ -93,10 +94,9 @@ def hostile(clean: Path, source: Path, folder: Path) -> dict[str, Path]:
 
 _WARM = """
 import time, numpy as np
-from altfuse.io.fastdf import index_file, _walk
+from altfuse.io.fastdf import index_file
 from altfuse.io import read_log
-for dtype in (np.int32, np.int64):  # load the compiled walk first: not the file's time
-    _walk(np.zeros(1, dtype=dtype), np.ones(1, dtype=dtype), 1)
+index_file(SMALL)  # load the compiled scan and walk first: not the file's time
 """
 
 CHILD = {
@@ -164,7 +164,7 @@ def median_of(runs: int, kind: str, path: Path) -> dict[str, float]:
 
 def measure(kind: str, path: Path) -> dict[str, float]:
     code = (
-        f"PATH = {str(path)!r}\nTYPES = {TYPES!r}\n"
+        f"PATH = {str(path)!r}\nTYPES = {TYPES!r}\nSMALL = {str(SMALL)!r}\n"
         + CHILD[kind]
         + "\nimport json, resource\nRESULT['peak_mb'] = "
         "resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024\nprint(json.dumps(RESULT))\n"
