@@ -50,7 +50,9 @@ floored at 1e-4 m²); the spatial weights are then unreliable. Measured on the m
 Decided here, as the paper is silent: a sensor absent at ``k`` keeps its estimate (its variance
 grows by ``q`` in the practical form) and takes no part in the spatial weighting at ``k``; a sensor
 starts its recursion at its first sample; with a single sensor, ``delta2`` is its
-auto-covariance ``R_pp`` (no cross-covariance to subtract).
+auto-covariance ``R_pp`` (no cross-covariance to subtract); a sensor alone at ``k`` after it had
+a partner keeps the ``delta2`` of its last tick with one (``R_pp`` alone is the flight's
+motion: 10^3 m^2 for a barometer in a climb while the GPS was out).
 """
 
 from __future__ import annotations
@@ -69,9 +71,10 @@ from altfuse.params import Params, param
 #: Smallest measurement variance [m²]: keeps 1/delta2 finite where the estimate is 0 (the first
 #: sample has no spread) or negative (cross-covariance larger than auto-covariance by chance).
 VARIANCE_FLOOR_M2 = 1e-4
-#: A pause this long [s] in every sensor restarts the recursions (3.1-3.3): their running
-#: statistics describe one stationary flight, and across a log's splice the one before it
-#: held the estimate 50 m off for a minute (the 3.4 Solo log).
+#: A pause this long [s] in every sensor, or in any one, restarts the recursions (3.1-3.3):
+#: their running statistics describe one stationary flight. Across a log's splice the one
+#: before it held the estimate 50 m off for a minute (the 3.4 Solo log); across a GPS outage
+#: in a climb, 220 m (a GPS frozen for 80 s, its samples dropped as stuck).
 RESTART_S = 5.0
 #: Smallest estimate variance P+ [m²]: only numerical (the paper's form drives P+ towards 0).
 ESTIMATE_FLOOR_M2 = 1e-12
@@ -129,6 +132,7 @@ def measurement_variances(z: FloatArray) -> FloatArray:
     if n == 1:
         return np.where(count > 0, np.maximum(r_pp, VARIANCE_FLOOR_M2), np.nan)
     cross = np.zeros_like(z)
+    partnered = np.zeros(z.shape, dtype=bool)
     for p in range(n):
         total = np.zeros(z.shape[0])
         others = np.zeros(z.shape[0])
@@ -144,7 +148,15 @@ def measurement_variances(z: FloatArray) -> FloatArray:
         # R_p(k): the mean over the other sensors valid at k
         with np.errstate(invalid="ignore", divide="ignore"):
             cross[:, p] = np.where(others > 0, total / others, 0.0)
+        partnered[:, p] = others > 0
     delta2 = np.maximum(r_pp - cross, VARIANCE_FLOOR_M2)
+    # a sensor alone at k keeps the variance it had with a partner: its noise did not grow when
+    # the other went, and R_pp alone holds the flight's motion (a GPS frozen for 80 s, dropped,
+    # made the barometer's variance 10^3 m^2 and held delay2 at 77 m while it climbed to 220 m)
+    ticks = np.arange(z.shape[0])[:, None]
+    last = np.maximum.accumulate(np.where(partnered, ticks, -1), axis=0)
+    held = np.take_along_axis(delta2, np.maximum(last, 0), axis=0)
+    delta2 = np.where(~partnered & (last >= 0), held, delta2)
     return np.where(count > 0, delta2, np.nan)
 
 
@@ -208,8 +220,11 @@ def spatial_weights(pplus: FloatArray, valid: FloatArray) -> FloatArray:
 
 
 def _stretches(t: FloatArray, z: FloatArray) -> list[slice]:
-    """The parts of the clock between pauses of ``RESTART_S`` or more in every sensor."""
-    cuts = [after for _, after in pauses(t, z, RESTART_S)]
+    """The parts of the clock between the ends of pauses of ``RESTART_S`` or more, in every
+    sensor or in any one: the running statistics of 3.1 describe one stationary flight, and a
+    sensor back from an outage in a climb comes back to another."""
+    each = [pauses(t, z[:, [j]], RESTART_S) for j in range(z.shape[1])]
+    cuts = sorted({after for pauses_of_one in each for _, after in pauses_of_one})
     return [slice(a, b) for a, b in itertools.pairwise([0, *cuts, z.shape[0]])]
 
 
