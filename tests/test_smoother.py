@@ -233,7 +233,8 @@ def a_of(inputs: FusionInput) -> np.ndarray:
 
 def test_the_sensors_refuse_an_accelerometer_they_all_contradict() -> None:
     """Issue 15, item 2: where a GPS and a barometer agree against the accelerometer for seconds,
-    its noise is raised there, and only there; two barometers are one witness."""
+    its noise is raised there, and only there; where they are the only witnesses, two
+    barometers (one air) refuse it too; a sensor that sides with the accelerometer keeps it."""
     inputs, h, t = _wrong_accelerometer(("gps", "baro"))
     assert inputs.accel is not None
     refused = accel_refused(inputs, inputs.accel.on_clock)
@@ -243,7 +244,17 @@ def test_the_sensors_refuse_an_accelerometer_they_all_contradict() -> None:
     assert np.max(np.abs(res.fused - h)) < 0.3  # 40 m away before
     one_air, _, _ = _wrong_accelerometer(("baro", "baro"))
     assert one_air.accel is not None
-    assert not accel_refused(one_air, one_air.accel.on_clock).any()
+    assert accel_refused(one_air, one_air.accel.on_clock)[(t >= 60.5) & (t < 62.5)].min() > 1.0
+    # the barometer alone moves (a pressure transient): the GPS sides with the accelerometer
+    bump = np.where((t >= 60) & (t < 63), 3.0 * np.sin(np.pi * (t - 60) / 3) ** 2, 0.0)
+    transient = FusionInput.from_heights(
+        inputs.z + np.column_stack([0 * t, bump]),
+        0.1,
+        ("gps", "baro"),
+        accel_up=a_of(inputs) - np.where((t >= 60) & (t < 63), 8.0, 0.0),
+    )
+    assert transient.accel is not None
+    assert not accel_refused(transient, transient.accel.on_clock).any()
     # a third sensor absent there has no vote, and takes none away
     gone = np.where(((t > 50) & (t < 70))[:, None], np.nan, inputs.z[:, :1])
     three = FusionInput.from_heights(
@@ -384,3 +395,18 @@ def test_a_rangefinder_over_a_ground_step_is_not_rejected_for_more_than_two_seco
     ground = res.traces["offset"][:, 2]
     assert ground[450] == pytest.approx(0.04, abs=0.01)
     assert ground[850] == pytest.approx(0.0, abs=0.01)
+
+
+def test_a_barometer_alone_refuses_an_accelerometer_it_contradicts() -> None:
+    """The GPS out (a frozen receiver, dropped as stuck) while the accelerometer is 8 m/s^2 off
+    for 3 s: the barometer is the only witness, and its word stands (a wrong sensor costs its
+    own error, a wrong accelerometer grows without bound: 100 m on the 3.3 plane log; here
+    measured 23.8 m before, 0.24 m after)."""
+    inputs, h, t = _wrong_accelerometer(("gps", "baro"))
+    z = inputs.z.copy()
+    z[(t > 40) & (t < 80), 0] = np.nan
+    alone = FusionInput.from_heights(z, 0.1, ("gps", "baro"), accel_up=a_of(inputs))
+    assert alone.accel is not None
+    assert accel_refused(alone, alone.accel.on_clock)[(t >= 60.5) & (t < 62.5)].min() > 1.0
+    res = fuse_smoother(alone, SmootherParams())
+    assert np.max(np.abs(res.fused - h)) < 1.0
