@@ -332,23 +332,29 @@ def test_a_python_warning_is_never_a_second_stderr_line(
     assert "RuntimeWarning: invalid value encountered in divide" in debug.stderr
 
 
+_PROCESS_IN_WORKER = batch_module._process_in_worker
+
+
 def dying(job: batch_module.Job, options: BatchOptions) -> batch_module.LogResult:
-    """A worker's job that ends its process on ``b.bin``, as the SIGBUS handler would."""
+    """A worker's job that ends its process while it reads ``b.bin``, as the SIGBUS handler
+    would, after the others' first second (so that they are running when the pool breaks)."""
     if job.log.name == "b.bin":
+        batch_module._worker.started.put(str(job.relative))
+        time.sleep(1.0)
         os._exit(1)
-    return batch_module.process(job, options)
+    return _PROCESS_IN_WORKER(job, options)
 
 
-def test_a_worker_that_dies_is_a_failed_row_not_a_crashed_batch(tmp_path: Path) -> None:
-    logs = copies(tmp_path / "logs", "a.bin", "b.bin", "c.bin")
-    original = batch_module._process_in_worker
-    batch_module._process_in_worker = dying  # type: ignore[assignment]
-    try:
+def test_a_worker_that_dies_fails_its_log_alone(tmp_path: Path) -> None:
+    """The pool breaks, and every job in it: those running run again each alone, the others
+    in a new pool; only the log that kills its worker fails (all unfinished ones did)."""
+    logs = copies(tmp_path / "logs", "a.bin", "b.bin", "c.bin", "d.bin", "e.bin")
+    with pytest.MonkeyPatch.context() as monkey:
+        monkey.setattr(batch_module, "_process_in_worker", dying)
         results = run_batch([logs], tmp_path / "out", jobs=2)
-    finally:
-        batch_module._process_in_worker = original  # type: ignore[assignment]
     by_log = {r.log: r for r in results}
-    assert set(by_log) == {"a.bin", "b.bin", "c.bin"}  # a row each, whatever the pool did
+    assert set(by_log) == {"a.bin", "b.bin", "c.bin", "d.bin", "e.bin"}  # a row each
     assert by_log["b.bin"].status == "failed"
-    assert "a worker process died" in by_log["b.bin"].error
+    assert "its worker process died" in by_log["b.bin"].error
+    assert {r.status for name, r in by_log.items() if name != "b.bin"} == {"ok"}
     assert pd.read_csv(tmp_path / "out" / "summary.csv")["log"].tolist() == sorted(by_log)

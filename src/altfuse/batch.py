@@ -23,11 +23,12 @@ import ctypes
 import fcntl
 import fnmatch
 import json
+import multiprocessing
 import os
 import signal
 import sys
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
@@ -234,6 +235,7 @@ class _WorkerState:
 
     running: bool = False  # a log is being processed
     terminating: bool = False  # SIGTERM came (its exception can be lost in a C callback)
+    started: Any = None  # where the worker says which job it starts (a multiprocessing queue)
 
 
 _worker = _WorkerState()
@@ -246,10 +248,12 @@ def _worker_signal(_signum: int, _frame: object) -> None:
     os._exit(EXIT_TERMINATED)
 
 
-def _worker_start(parent: int) -> None:
+def _worker_start(parent: int, started: Any) -> None:
     """In each worker process: SIGTERM ends it, removing the temporary files of the log in
     hand, and on Linux the worker is sent SIGTERM when its parent dies (``PR_SET_PDEATHSIG``),
-    so that a killed batch does not leave workers writing on."""
+    so that a killed batch does not leave workers writing on. ``started`` is the queue on
+    which it says which job it starts."""
+    _worker.started = started
     signal.signal(signal.SIGTERM, _worker_signal)
     if sys.platform.startswith("linux"):
         with contextlib.suppress(OSError, AttributeError):
@@ -259,6 +263,7 @@ def _worker_start(parent: int) -> None:
 
 
 def _process_in_worker(job: Job, options: BatchOptions) -> LogResult:
+    _worker.started.put(str(job.relative))
     _worker.running = True
     try:
         return process(job, options)
@@ -271,21 +276,54 @@ def _process_in_worker(job: Job, options: BatchOptions) -> LogResult:
 
 
 def _local(jobs: list[Job], options: BatchOptions, workers: int) -> Iterator[LogResult]:
+    """The jobs in ``workers`` processes. A worker that dies (SIGBUS: a log shrank while it was
+    read) breaks the pool and every job in it: the jobs that had not started run again in a
+    new pool, and those that were running, one of them the cause, each alone in a pool of its
+    own, so that only a log that kills its worker fails."""
     if workers <= 1:
         for job in jobs:
             yield process(job, options)
         return
+    pending = jobs
+    while pending:
+        running, waiting = yield from _pool(pending, options, workers)
+        if not running and len(waiting) == len(pending):  # no worker got as far as a job
+            running, waiting = waiting, []
+        pending = waiting
+        for job in running:
+            suspect, _ = yield from _pool([job], options, 1)
+            for lost in suspect:
+                why = "not finished: its worker process died (a log that shrank while read?)"
+                yield LogResult(printable(str(lost.relative)), "failed", why)
+
+
+def _pool(
+    jobs: list[Job], options: BatchOptions, workers: int
+) -> Generator[LogResult, None, tuple[list[Job], list[Job]]]:
+    """The results of the jobs one pool of ``workers`` processes finished; returns the jobs
+    lost when a worker died, those that had started and those that had not."""
+    context = multiprocessing.get_context()
+    started = context.SimpleQueue()
+    lost: list[Job] = []
     with ProcessPoolExecutor(
-        max_workers=workers, initializer=_worker_start, initargs=(os.getpid(),)
+        max_workers=workers,
+        mp_context=context,
+        initializer=_worker_start,
+        initargs=(os.getpid(), started),
     ) as pool:
         futures = {pool.submit(_process_in_worker, job, options): job for job in jobs}
         for future in as_completed(futures):
             try:
                 yield future.result()
-            except BrokenProcessPool:  # a worker died (SIGBUS: a log shrank while read)
-                name = printable(str(futures[future].relative))
-                why = "not finished: a worker process died (a log that shrank while read?)"
-                yield LogResult(name, "failed", why)
+            except BrokenProcessPool:
+                lost.append(futures[future])
+    begun = set()
+    while not started.empty():
+        begun.add(started.get())
+    started.close()
+    return [j for j in lost if str(j.relative) in begun], [
+        j for j in lost if str(j.relative) not in begun
+    ]
 
 
 def _dask(jobs: list[Job], options: BatchOptions, scheduler: str) -> Iterator[LogResult]:
