@@ -14,6 +14,7 @@ from click.testing import CliRunner
 from altfuse.align import align, tick_cap
 from altfuse.cli import cli
 from altfuse.errors import NoUsableSensorsError
+from altfuse.evaluation import evaluate
 from altfuse.info import damage
 from altfuse.model import FlightLog, Series
 from altfuse.pipeline import FuseOptions, fuse_log
@@ -32,6 +33,7 @@ from altfuse.screen import (
 )  # fmt: skip
 from altfuse.simulate import _TYPES, SimulatedFlight, simulate_flight, write_simulated_log
 from conftest import SAMPLE_LOG, ardupilot_logs, shared_log
+from fuzzing import Records
 
 
 def series(kind: str, t: np.ndarray, v: np.ndarray) -> Series:
@@ -322,3 +324,33 @@ def test_every_timestamp_near_2_to_the_63_is_refused_in_one_line(tmp_path: Path)
     [line] = result.stderr.strip().splitlines()
     assert "time beyond ten years since boot" in line
     assert not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize(
+    "relative",
+    [
+        "truth/copter_3.4dev_gusbus4_climb305m.BIN",
+        "truth/plane_3.3.0a1_gitterbadger_autotest_climb386m_imunoise.BIN",
+    ],
+)
+def test_a_gps_frozen_through_a_climb_drags_no_method(relative: str, tmp_path: Path) -> None:
+    """Issue 16: GPS.Alt frozen at one value with its fix for the middle 30 % of a climbing
+    flight. Its samples go as stuck; every method then fuses what is left (measured before,
+    RMSE against SIM: delay2 113 m on the 305 m log, 120 m on the plane's, multilayer 101 and
+    115 m, the smoother 6.9 m on the plane's; after: 0.02-0.09 m and 0.2-1.0 m)."""
+    source = shared_log(relative)
+    records = Records(source)
+    gps = next(f for f in records.formats.values() if f.name == "GPS")
+    at = records.offsets_of(gps, "Alt")
+    width = gps.dtype.fields["Alt"][0].itemsize  # type: ignore[index]
+    data = np.frombuffer(source.read_bytes(), np.uint8).copy()
+    a, b = int(0.3 * at.size), int(0.6 * at.size)
+    data[at[a:b, None] + np.arange(width)] = data[at[a] : at[a] + width].copy()
+    frozen = tmp_path / "frozen.bin"
+    frozen.write_bytes(data.tobytes())
+    result = evaluate(frozen)
+    gps_series = next(s for s in result.prepared.log.sensors if s.name == "gps")
+    assert gps_series.dropped[STUCK] > 0.2 * at.size
+    rmse = {r.name: r.overall.rmse for r in result.rows if r.kind == "method"}
+    assert set(rmse) == {"mean", "support", "delay1", "delay2", "multilayer", "smoother"}
+    assert max(rmse.values()) < 1.5, rmse

@@ -23,7 +23,7 @@ Departures, each because the reconstruction or the paper's form fails on real lo
   the filter then settles one tick ahead of it (measured 93 ms ahead of the truth on the
   simulator's 305 m climb: RMSE 0.144 m where the sensors' mean has 0.013 m).
 - The gate (``gate_form="consensus"``, the default) does not stay shut against the sensors'
-  consensus: where every valid sensor, of two kinds at least, has stayed more than ``e_max``
+  consensus: where every valid sensor has stayed more than ``e_max``
   from the filter on one side for ``AGAINST_CONSENSUS_S``, it is the accelerometer's
   integration that is wrong (a clipped sample, an impact), and the filter is
   reset to layer 1: ``x = z``, ``v`` the slope of ``z`` over the last ``VELOCITY_SPAN_S``; the
@@ -57,7 +57,7 @@ import numpy as np
 from altfuse.fuse.base import INERTIAL, FusionInput, FusionResult
 from altfuse.fuse.delay import DelayParams, layer1, process_noise
 from altfuse.metrics import envelope
-from altfuse.model import FloatArray, SensorKind
+from altfuse.model import FloatArray
 from altfuse.params import param
 
 #: Longest stretch [s] the filter integrates the accelerometer with no layer-1 value.
@@ -118,16 +118,6 @@ class Complementary:
     resets: int  # times the filter was reset to layer 1 (gate_form="consensus")
 
 
-def witnesses(z: FloatArray, kinds: tuple[SensorKind, ...]) -> tuple[FloatArray, FloatArray]:
-    """Per tick, the lowest and the highest valid sensor where valid sensors of two kinds or more
-    (two barometers read one air) witness the height; NaN elsewhere. ``z``: shape (T, n)."""
-    valid = np.isfinite(z)
-    seen = [valid[:, [k == kind for k in kinds]].any(axis=1) for kind in sorted(set(kinds))]
-    two = np.sum(seen, axis=0) >= 2 if seen else np.zeros(z.shape[0], bool)
-    lo, hi = envelope(z)
-    return np.where(two, lo, np.nan), np.where(two, hi, np.nan)
-
-
 def _slope(z: FloatArray, i: int, span: int, dt: float) -> float:
     """Layer 1's slope [m/s] over the ``span`` ticks before tick ``i``; 0 where it cannot tell."""
     j = i - span
@@ -146,9 +136,12 @@ def complementary_filter(
     """Run the adaptive complementary filter (3.5) over ``z`` [m] and ``a`` [m/s², up] with
     ``params``' time constant, gate and ``e_max`` (its defaults without).
 
-    ``sensors``: per tick the lowest and highest of the sensors that witness the height
-    (:func:`witnesses`); with ``gate_form="consensus"`` the filter is reset to layer 1 where
-    they all lie more than ``e_max`` from it on one side for ``AGAINST_CONSENSUS_S``.
+    ``sensors``: per tick the lowest and highest valid sensor (NaN where none is); with
+    ``gate_form="consensus"`` the filter is reset to layer 1 where they all lie more than
+    ``e_max`` from it on one side for ``AGAINST_CONSENSUS_S``. One kind of sensor alone is a
+    consensus too: two barometers read one air, yet with no second opinion a wrong sensor
+    costs its own error, and a wrong integration grows without bound (the 3.3 plane with its
+    GPS frozen, its barometer alone: 6.1 m RMSE coasting).
     """
     p = params or MultilayerParams()
     T, e_max_m, reopen_s = p.time_constant_s, p.e_max_m, p.reopen_s
@@ -182,8 +175,9 @@ def complementary_filter(
         # v-(n) = v(n-1) + a(n) dt,  x-(n) = x(n-1) + v-(n) dt
         v_pred = v_prev + (0.0 if distrust else acc[i]) * dt
         x_pred = x_prev + v_pred * dt
-        # e(n) = z(n) - x-(n)
-        e_i = z[i] - x_pred
+        # e(n) = z(n) - x-(n), with z(n) within the sensors (layer 1 lags them where its
+        # variances carry the motion: 80 m behind a barometer alone in a descent)
+        e_i = min(max(z[i], lo[i]), hi[i]) - x_pred if has_z and lo[i] <= hi[i] else z[i] - x_pred
         if not has_z:
             k_i, e_i = 0.0, 0.0
         else:
@@ -191,8 +185,8 @@ def complementary_filter(
             beyond = lo[i] - x_pred > e_max_m or x_pred - hi[i] > e_max_m
             against = against + 1 if beyond else 0
             if against >= against_ticks:
-                # the accelerometer against the sensors: x = z, v its slope
-                x_prev, v_prev = float(z[i]), _slope(z, i, span, dt)
+                # the accelerometer against the sensors: x = z (within them), v its slope
+                x_prev, v_prev = x_pred + e_i, _slope(z, i, span, dt)
                 shut_for, resets, distrust, against = 0.0, resets + 1, distrust_ticks, 0
                 x[i], v[i], e[i], k[i] = x_prev, v_prev, e_i, 1.0
                 continue
@@ -225,7 +219,7 @@ def fuse_multilayer(inputs: FusionInput, params: MultilayerParams) -> FusionResu
         accel_up,
         inputs.dt_s,
         params,
-        witnesses(inputs.z, inputs.kinds),
+        envelope(inputs.z),
     )
     status = np.where(np.isnan(first.fused) & np.isfinite(cf.x), INERTIAL, first.status)
     return FusionResult(
