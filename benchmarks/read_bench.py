@@ -10,7 +10,8 @@ fresh process (so that peak memory is that of the measurement alone):
 
 - ``altfuse``: ``read_dataflash``, split into the index, the decoding and the file's sha256;
 - ``pymavlink``: a ``recv_match`` loop over the types altfuse reads;
-- ``plain``: one numpy pass over the file's bytes (read them, count the 0xA3 bytes).
+- ``plain``: one numpy pass over the file's bytes (read them, count the 0xA3 bytes);
+- ``altfuse fuse`` end to end as a user runs it, writing CSV and writing Parquet.
 
 With ``--adversarial-mb`` (issue 16), the reader's index on two hostile files beside a clean
 one of the same size (built as above): the source log followed by repeated header bytes
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -155,6 +157,23 @@ RESULT = {"seconds": time.perf_counter() - t0, "a3_bytes": count}
 }
 
 
+def fuse_process(log: Path, out: Path) -> dict[str, float]:
+    """``altfuse fuse LOG -o OUT`` as a user runs it: wall time and peak memory [MB]."""
+    command = [str(Path(sys.executable).with_name("altfuse")), "fuse", str(log), "-o", str(out)]
+    started = time.perf_counter()
+    child = subprocess.Popen([*command, "--force"], stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(child.pid, 0)
+    if status:
+        raise RuntimeError(f"{' '.join(command)} failed ({status})")
+    return {"seconds": time.perf_counter() - started, "peak_mb": usage.ru_maxrss / 1024}
+
+
+def median_fuse(runs: int, log: Path, out: Path) -> dict[str, float]:
+    """The whole-process run with the median time of ``runs``."""
+    results = sorted((fuse_process(log, out) for _ in range(runs)), key=lambda r: r["seconds"])
+    return results[len(results) // 2]
+
+
 def median_of(runs: int, kind: str, path: Path) -> dict[str, float]:
     """The run with the median total time of ``runs`` fresh-process runs."""
     results = [measure(kind, path) for _ in range(runs)]
@@ -217,6 +236,13 @@ def main() -> None:
             f"{whole['seconds']:.2f} s, peak {whole['peak_mb']:.0f} MB "
             f"({whole['peak_mb'] / file_mb:.2f}x the file); sha256 alone {digest['seconds']:.2f} s"
         )
+        for suffix in ("csv", "parquet"):
+            fuse = median_fuse(args.repeat, path, Path(tmp) / f"fused.{suffix}")
+            print(
+                f"altfuse fuse -o fused.{suffix} (whole process): {fuse['seconds']:.2f} s "
+                f"({fuse['seconds'] / plain['seconds']:.1f}x the plain pass), peak "
+                f"{fuse['peak_mb']:.0f} MB ({fuse['peak_mb'] / file_mb:.2f}x the file)"
+            )
         if not args.skip_pymavlink:
             theirs = measure("pymavlink", path)
             print(

@@ -44,6 +44,7 @@ from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
 from altfuse.write import (
     EXIT_TERMINATED,
+    TableFormat,
     Terminated,
     atomic_outputs,
     interruption,
@@ -67,6 +68,7 @@ class BatchOptions:
     method is evaluated with its parameters in ``fuse.params`` (or its defaults)."""
 
     fuse: FuseOptions = field(default_factory=FuseOptions)
+    format: TableFormat = "csv"  # of the fused table and the weight traces
     weights: bool = False
     plot: PlotFormat | None = None
     evaluate: bool = False
@@ -76,6 +78,8 @@ class BatchOptions:
     def __post_init__(self) -> None:
         if self.plot is not None and self.plot not in get_args(PlotFormat):
             raise InvalidParameter("plot", f"must be one of png, svg, got {self.plot!r}")
+        if self.format not in get_args(TableFormat):
+            raise InvalidParameter("format", f"must be one of csv, parquet, got {self.format!r}")
 
 
 @dataclass(frozen=True)
@@ -88,9 +92,9 @@ class Job:
 
     def outputs(self, options: BatchOptions) -> Outputs:
         return Outputs(
-            csv=self._with(".csv"),
+            csv=self._with(f".{options.format}"),
             meta=self._with(".meta.json"),
-            weights=self._with(".weights.csv") if options.weights else None,
+            weights=self._with(f".weights.{options.format}") if options.weights else None,
             plot=self._with(f".{options.plot}") if options.plot else None,
             evaluation=self._with(".evaluation.json") if options.evaluate else None,
         )

@@ -39,6 +39,7 @@ from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
 from altfuse.write import (
     EXIT_TERMINATED,
+    TableFormat,
     Terminated,
     atomic_outputs,
     check_paths,
@@ -312,19 +313,23 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
 
 @cli.command(cls=_MethodCommand, choose="one")
 @_LOG_ARG
-@_output_option("The fused CSV to write; the provenance goes beside it as NAME.meta.json.")
+@_output_option(
+    "The fused table to write: CSV, or Parquet for a .parquet name; the provenance goes beside "
+    "it as NAME.meta.json."
+)
 @_pipeline_options
 @click.option(
     "--weights",
     "weights_path",
     type=_PATH,
-    help="Also write the weight traces (the weights and each method's diagnostics).",
+    help="Also write the weight traces (the weights and each method's diagnostics): CSV, or "
+    "Parquet for a .parquet name.",
 )
 @click.option(
     "--meta",
     "meta_path",
     type=_PATH,
-    help="Where to write the provenance JSON [default: beside the CSV].",
+    help="Where to write the provenance JSON [default: beside the fused table].",
 )
 @_plot_option
 @_force_option
@@ -348,6 +353,7 @@ def fuse(
       altfuse fuse flight.bin -o flight.csv -m support --alpha 0.5 --beta 10 --weights w.csv
       altfuse fuse flight.bin -o flight.csv --method multilayer --plot flight.png
       altfuse fuse flight.bin -o flight.csv --method smoother --sigma gps=0.8
+      altfuse fuse flight.bin -o flight.parquet --weights weights.parquet
     """
     method = options.pop("method")
     params = params_by_method(_method_values(options), [method])
@@ -519,6 +525,14 @@ class _Progress:
     help="Skip logs whose outputs are complete for this input and these options.",
 )
 @_pipeline_options
+@click.option(
+    "--format",
+    "table_format",
+    type=click.Choice(["csv", "parquet"]),
+    default="csv",
+    show_default=True,
+    help="Format of each log's fused table (and weight traces).",
+)
 @click.option("--weights", is_flag=True, help="Also write each log's weight traces.")
 @click.option(
     "--plot",
@@ -540,6 +554,7 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
     jobs: int | None,
     scheduler: str | None,
     skip_existing: bool,
+    table_format: TableFormat,
     weights: bool,
     plot_format: PlotFormat | None,
     with_evaluation: bool,
@@ -559,6 +574,7 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
       altfuse batch logs/ -o results/
       altfuse batch logs/ more/flight.bin -o results/ --jobs 2 --evaluate --plot png
       altfuse batch logs/ -o results/ --skip-existing
+      altfuse batch logs/ -o results/ --format parquet
       altfuse batch logs/ -o results/ -m support --alpha 0.5
       altfuse batch logs/ -o results/ --scheduler tcp://10.0.0.5:8786
     """
@@ -567,6 +583,7 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
     params = params_by_method(_method_values(options), evaluated)
     settings = BatchOptions(
         fuse=FuseOptions(method=method, params=params, **options),
+        format=table_format,
         weights=weights,
         plot=plot_format,
         evaluate=with_evaluation,

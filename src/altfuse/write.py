@@ -18,7 +18,7 @@ import socket
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any
+from typing import IO, TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -28,7 +28,65 @@ from altfuse.errors import AltfuseError, ParameterError
 if TYPE_CHECKING:
     from altfuse.pipeline import FuseRun
 
-FLOAT_FORMAT = "%.6f"
+#: The fused table's formats, by the output's suffix (any other suffix: CSV).
+TableFormat = Literal["csv", "parquet"]
+#: Decimals of every float in a CSV: micrometres, microseconds. Each value is rounded to them and
+#: written in its shortest form (``1.5``, ``0.333333``; an empty field where there is none).
+CSV_DECIMALS = 6
+
+
+def table_format(path: Path) -> TableFormat:
+    """``parquet`` for a ``.parquet`` name, else ``csv``."""
+    return "parquet" if path.suffix.lower() == ".parquet" else "csv"
+
+
+_UNITS = {"status": "", "velocity": "m/s", "accel_bias": "m/s^2", "accel_up": "m/s^2",
+          "correction": "m"}  # fmt: skip
+
+
+def column_unit(name: str) -> str:
+    """A fused or weights table column's unit (Parquet column metadata): ``m``, ``s``,
+    ``m/s``, ``m/s^2``, ``1`` (a share or a count), or ``""`` (text)."""
+    if name in _UNITS:
+        return _UNITS[name]
+    if name.endswith("_s"):
+        return "s"
+    if name.endswith(("_m", "_std")) or name.startswith(("offset_", "temporal_estimate_")):
+        return "m"
+    if "variance" in name:
+        return "m^2"
+    return "1"
+
+
+def write_table(table: pd.DataFrame, fmt: TableFormat, metadata: dict[str, Any]) -> Writer:
+    """A binary writer of ``table``: Parquet (each column's unit in its metadata, ``metadata``
+    as JSON in the file's key-value metadata under ``altfuse``), or CSV (see
+    ``CSV_DECIMALS``), both by Arrow's C++ writers: pandas' CSV writer formats each float in
+    Python (1.9 s of a 4 s run on a 300 MB log)."""
+    import pyarrow as pa
+
+    def write(handle: IO[Any]) -> None:
+        if fmt == "parquet":
+            import pyarrow.parquet as pq
+
+            arrow = pa.Table.from_pandas(table, preserve_index=False)
+            fields = [f.with_metadata({"unit": column_unit(f.name)}) for f in arrow.schema]
+            schema = pa.schema(fields, metadata={"altfuse": json.dumps(metadata, default=str)})
+            pq.write_table(arrow.cast(schema), handle)
+            return
+        import pyarrow.csv as pacsv
+
+        rounded = table.copy()
+        floats = rounded.select_dtypes("float").columns
+        # + 0.0: no "-0" where a small negative value rounds to zero
+        rounded[floats] = rounded[floats].round(CSV_DECIMALS) + 0.0
+        arrow = pa.Table.from_pandas(rounded, preserve_index=False)
+        # unquoted, as pandas writes them (Arrow quotes every name); none needs quotes
+        handle.write((",".join(table.columns) + "\n").encode())
+        options = pacsv.WriteOptions(include_header=False, quoting_style="none")
+        pacsv.write_csv(arrow, handle, options)
+
+    return write
 
 
 def fused_table(run: FuseRun) -> pd.DataFrame:
@@ -291,7 +349,7 @@ def write_outputs(
     whose listed outputs all exist marks a complete set. Returns the files written, by role."""
     csv_path = Path(csv_path)
     meta = Path(meta_path) if meta_path else default_meta_path(csv_path)
-    outputs = {"csv": csv_path, "meta": meta}
+    outputs = {table_format(csv_path): csv_path, "meta": meta}
     if weights_path:
         outputs["weights"] = Path(weights_path)
     for path in extra or {}:
@@ -300,14 +358,11 @@ def write_outputs(
     listed = {role: os.path.relpath(path, meta.parent) for role, path in outputs.items()}
     provenance = dict(run.provenance, outputs=listed)
     with atomic_outputs() as stage:
-        stage(
-            csv_path, lambda f: fused_table(run).to_csv(f, index=False, float_format=FLOAT_FORMAT)
-        )
+        fused = write_table(fused_table(run), table_format(csv_path), provenance)
+        stage(csv_path, fused, binary=True)
         if weights_path:
-            stage(
-                Path(weights_path),
-                lambda f: weights_table(run).to_csv(f, index=False, float_format=FLOAT_FORMAT),
-            )
+            weights = Path(weights_path)
+            stage(weights, write_table(weights_table(run), table_format(weights), provenance), True)
         for path, (write, binary) in (extra or {}).items():
             stage(path, write, binary)
         stage(meta, write_json(provenance))

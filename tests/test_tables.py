@@ -1,0 +1,123 @@
+"""The fused table's files (issue 17): Parquet beside CSV, the CSV's float format, both readable
+without altfuse."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+from altfuse.batch import BatchOptions, run_batch
+from altfuse.write import CSV_DECIMALS, column_unit
+from conftest import SAMPLE_LOG
+from test_cli import run
+
+
+def test_the_parquet_table_reads_back_to_the_csv_s_values(tmp_path: Path) -> None:
+    """Acceptance 4: the same run as CSV and as Parquet, read by pandas; Parquet keeps every
+    float whole, the CSV to CSV_DECIMALS decimals."""
+    for suffix in ("csv", "parquet"):
+        out, weights = tmp_path / f"flight.{suffix}", tmp_path / f"w.{suffix}"
+        result = run("fuse", SAMPLE_LOG, "-o", out, "--weights", weights, "--meta", f"{out}.json")
+        assert result.exit_code == 0, result.output
+    for name in ("flight", "w"):
+        csv = pd.read_csv(tmp_path / f"{name}.csv")
+        parquet = pd.read_parquet(tmp_path / f"{name}.parquet")
+        assert list(parquet.columns) == list(csv.columns)
+        assert parquet.columns[0] == "time_s"
+        assert len(parquet) == len(csv) == 1200
+        for column in csv.columns:
+            if csv[column].dtype.kind == "f":
+                np.testing.assert_allclose(
+                    parquet[column], csv[column], atol=0.5 * 10**-CSV_DECIMALS, rtol=0
+                )
+                assert (parquet[column].isna() == csv[column].isna()).all()
+            else:
+                assert (parquet[column] == csv[column]).all(), column
+    assert set(pd.read_parquet(tmp_path / "flight.parquet")["status"]) <= {
+        "fused",
+        "single",
+        "equal",
+        "none",
+        "diverged",
+    }
+
+
+def test_the_parquet_file_carries_units_and_the_provenance(tmp_path: Path) -> None:
+    out = tmp_path / "flight.parquet"
+    assert run("fuse", SAMPLE_LOG, "-o", out).exit_code == 0
+    table = pq.read_table(out)
+    units = {f.name: (f.metadata or {}).get(b"unit", b"?").decode() for f in table.schema}
+    assert units["time_s"] == "s"
+    assert units["fused_alt_m"] == units["fused_std_m"] == units["alt_gps_m"] == "m"
+    assert units["weight_gps"] == units["n_sensors"] == "1"
+    assert units["status"] == ""
+    provenance = json.loads(table.schema.metadata[b"altfuse"])
+    sidecar = json.loads((tmp_path / "flight.meta.json").read_text())
+    assert provenance == sidecar
+    assert sidecar["outputs"] == {"parquet": "flight.parquet", "meta": "flight.meta.json"}
+
+
+def test_the_csv_float_format_is_documented_and_byte_stable(tmp_path: Path) -> None:
+    """Each float rounded to CSV_DECIMALS and written in its shortest form, empty where there
+    is none, no "-0", names unquoted; two runs write the same bytes."""
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    for out in (a, b):
+        assert (
+            run("fuse", SAMPLE_LOG, "-o", out, "--meta", tmp_path / f"{out.stem}.json").exit_code
+            == 0
+        )
+    assert a.read_bytes() == b.read_bytes()
+    text = a.read_text()
+    header, first = text.splitlines()[:2]
+    assert header.startswith("time_s,alt_gps_m,")
+    assert '"' not in text
+    assert first.startswith("30,,")  # 30.0 s, no GPS yet
+    numbers = re.findall(r"-?\d+\.(\d+)", text)
+    assert numbers
+    assert max(len(d) for d in numbers) <= CSV_DECIMALS
+    assert not re.search(r"(^|,)-0(,|$)", text, flags=re.MULTILINE)
+
+
+@pytest.mark.parametrize(
+    ("name", "unit"),
+    [
+        ("time_s", "s"),
+        ("alt_baro2_m", "m"),
+        ("fused_std", "m"),
+        ("offset_gps", "m"),
+        ("velocity", "m/s"),
+        ("accel_bias", "m/s^2"),
+        ("accel_up", "m/s^2"),
+        ("correction", "m"),
+        ("layer1_m", "m"),
+        ("temporal_variance_baro", "m^2"),
+        ("support_var_baro", "1"),
+        ("variance_gps", "m^2"),
+        ("weight_rangefinder", "1"),
+        ("support_gps", "1"),
+        ("status", ""),
+    ],
+)
+def test_column_units(name: str, unit: str) -> None:
+    assert column_unit(name) == unit
+
+
+def test_a_batch_writes_parquet_and_resumes_on_it(tmp_path: Path) -> None:
+    options = BatchOptions(format="parquet", weights=True)
+    first = run_batch([SAMPLE_LOG], tmp_path / "out", options)
+    assert [r.status for r in first] == ["ok"]
+    written = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert written == ["mission.meta.json", "mission.parquet", "mission.weights.parquet",
+                       "summary.csv"]  # fmt: skip
+    again = run_batch([SAMPLE_LOG], tmp_path / "out", BatchOptions(format="parquet", weights=True,
+                                                                  skip_existing=True))  # fmt: skip
+    assert [r.status for r in again] == ["skipped"]
+    result = run("batch", SAMPLE_LOG, "-o", tmp_path / "cli", "--format", "xlsx")
+    assert result.exit_code == 2
+    assert "'xlsx' is not one of 'csv', 'parquet'" in result.output
