@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -250,3 +252,33 @@ def test_version_and_help() -> None:
         result = run(command, "--help")
         assert result.exit_code == 0
         assert "Example" in result.stdout
+
+
+def test_the_group_lists_each_command_by_its_own_first_sentence() -> None:
+    """``altfuse --help`` shows the commands without importing them (cli.COMMANDS): each
+    line is the command's own help, first paragraph."""
+    from altfuse import cli as cli_module
+    from altfuse import commands
+
+    for name, summary in cli_module.COMMANDS.items():
+        command = getattr(commands, name)
+        assert command.name == name
+        assert " ".join((command.help or "").split("\n\n")[0].split()) == summary
+    shown = run("--help").output
+    assert all(f"  {name}" in shown for name in cli_module.COMMANDS)
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["--version"], []])
+def test_help_and_version_load_nothing_heavy(argv: list[str]) -> None:
+    """Start-up pays only for what the command uses (issue 17): the group's help and the
+    version load click and the standard library, not numpy, pandas, scipy or numba."""
+    code = (
+        "import sys\nfrom altfuse.cli import cli\ntry:\n    cli(sys.argv[1:])\n"
+        "except SystemExit:\n    pass\n"
+        "print(sorted(m for m in ('numpy', 'pandas', 'scipy', 'numba', 'pyarrow', 'matplotlib')"
+        " if m in sys.modules))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, *argv], capture_output=True, text=True, check=True
+    )
+    assert done.stdout.strip().splitlines()[-1] == "[]"

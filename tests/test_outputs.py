@@ -23,7 +23,8 @@ from altfuse import write
 from altfuse.batch import BatchOptions, run_batch
 from altfuse.cli import cli
 from altfuse.errors import ParameterError
-from altfuse.write import TEMP_PREFIX, OutputError, atomic_outputs, raise_on_sigterm
+from altfuse.signals import Terminated, raise_on_sigterm
+from altfuse.write import TEMP_PREFIX, OutputError, atomic_outputs
 from conftest import SAMPLE_LOG
 from test_cli import assert_one_line_error, sha
 
@@ -168,7 +169,7 @@ def test_sigterm_removes_the_temporaries(tmp_path: Path) -> None:
 
     raise_on_sigterm()
     try:
-        with pytest.raises(write.Terminated):
+        with pytest.raises(Terminated):
             interrupted()
     finally:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
@@ -315,7 +316,7 @@ def test_a_python_warning_is_never_a_second_stderr_line(
 ) -> None:
     import warnings
 
-    from altfuse import cli as cli_module
+    from altfuse import commands as cli_module
 
     original = cli_module.fuse_to_files
 

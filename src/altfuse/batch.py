@@ -42,12 +42,10 @@ from altfuse.io import sha256_of
 from altfuse.job import Outputs, fuse_to_files
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
+from altfuse.signals import EXIT_TERMINATED, Terminated, interruption
 from altfuse.write import (
-    EXIT_TERMINATED,
     TableFormat,
-    Terminated,
     atomic_outputs,
-    interruption,
     remove_stale_temporaries,
 )
 

@@ -1,55 +1,44 @@
-"""The ``altfuse`` command line. Parses options, calls the library, prints; nothing else prints.
+"""The ``altfuse`` command line: the group, its global options, and one line per error.
 
 Every error a user can cause ends as one line on stderr (``altfuse: error: ...``) and a non-zero
 exit code: 1 for a log that cannot be processed, 2 for a usage or parameter error, 3 for a bug
 (with ``--debug`` showing its traceback).
+
+The commands live in :mod:`altfuse.commands` and are imported when one is run: ``altfuse
+--help`` and ``--version`` load click and the standard library only (0.1 s, where numpy,
+scipy, pandas and numba made them 0.7-1.8 s).
 """
 
 from __future__ import annotations
 
-import dataclasses
-import json
+import importlib
 import logging
 import signal
 import sys
-import time
 import traceback
-import typing
 import warnings
-from collections.abc import Callable, Mapping
-from pathlib import Path
-from typing import Any, Literal, NoReturn
+from typing import Any, NoReturn
 
 import click
-from click.core import ParameterSource
 
 from altfuse import __version__
-from altfuse.batch import EXIT_PARTIAL, SUMMARY, BatchOptions, LogResult, PlotFormat, run_batch
 from altfuse.errors import AltfuseError
-from altfuse.evaluation import TRUTHS, TruthChoice, evaluation_table
-from altfuse.evaluation import evaluate as evaluate_log
-from altfuse.fuse import DEFAULT_METHOD, METHODS, params_by_method
-from altfuse.info import as_text, damage, describe
-from altfuse.io import read_log
-from altfuse.job import Outputs, fuse_to_files
-from altfuse.metrics import ErrorStats
-from altfuse.params import UNIT_SUFFIXES, InvalidParameter, fields, flag_of, hints, unit_of
-from altfuse.pipeline import FuseOptions
-from altfuse.plot import check_plot_path, run_figure, writer
-from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
-from altfuse.write import (
-    EXIT_TERMINATED,
-    TableFormat,
-    Terminated,
-    atomic_outputs,
-    check_paths,
-    interruption,
-    raise_on_sigterm,
-    refuse_existing,
-    write_json,
-)
+from altfuse.params import InvalidParameter
+from altfuse.signals import EXIT_TERMINATED, Terminated, interruption, raise_on_sigterm
 
 EXIT_BUG = 3
+
+#: Each command and the first sentence of its help (shown by ``altfuse --help`` without
+#: importing it; tests/test_cli.py checks each against the command's own).
+COMMANDS = {
+    "fuse": "Fuse the altitude sensors of LOG into one altitude, written as a table (CSV or "
+    "Parquet).",
+    "evaluate": "Measure every method, every sensor and the onboard EKF against the truth in LOG.",
+    "batch": "Fuse every log under PATHS (folders searched recursively) into OUTPUT, in parallel.",
+    "info": "Show what LOG holds: vehicle, duration, altitude sources, references.",
+    "simulate": "Write a simulated SCENARIO flight as a DataFlash log, with the truth in SIM "
+    "records.",
+}
 
 
 class _OneLineFormatter(logging.Formatter):
@@ -85,21 +74,22 @@ def _fail_signalled(exc: BaseException | None) -> None:
         _fail("interrupted", 128 + signal.SIGINT)
 
 
-def _flag(name: str) -> str:
-    """The flag of the option a library parameter ``name`` comes from: a parameter field's, or
-    the name less its unit (``duration_s``: ``--duration``)."""
-    for cls in (FuseOptions, *(m.params for m in METHODS.values())):
-        for f in fields(cls):
-            if f.name == name:
-                return flag_of(f)
-    stem = next(
-        (name.removesuffix(s) for s in UNIT_SUFFIXES.values() if s and name.endswith(s)), name
-    )
-    return "--" + stem.replace("_", "-")
-
-
 class _Cli(click.Group):
-    """A group whose errors are one line each, whatever raised them."""
+    """A group whose errors are one line each, whatever raised them, and whose commands are
+    imported only when one is run."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:  # noqa: ARG002 (click's)
+        return list(COMMANDS)
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:  # noqa: ARG002
+        if cmd_name not in COMMANDS:
+            return None
+        command: click.Command = getattr(importlib.import_module("altfuse.commands"), cmd_name)
+        return command
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:  # noqa: ARG002
+        with formatter.section("Commands"):
+            formatter.write_dl(list(COMMANDS.items()))
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
         kwargs["standalone_mode"] = False
@@ -115,7 +105,9 @@ class _Cli(click.Group):
         except click.ClickException as exc:
             _fail(exc.format_message().replace("\n", " "), exc.exit_code)
         except InvalidParameter as exc:  # the library names the parameter; here, its flag
-            _fail(f"{_flag(exc.name)} {exc.problem}", exc.exit_code)
+            from altfuse.commands import flag_for
+
+            _fail(f"{flag_for(exc.name)} {exc.problem}", exc.exit_code)
         except AltfuseError as exc:
             _fail(str(exc), exc.exit_code)
         except Exception as exc:
@@ -124,133 +116,6 @@ class _Cli(click.Group):
                 traceback.print_exc()
             _fail(f"internal error: {type(exc).__name__}: {exc} (rerun with --debug)", EXIT_BUG)
         sys.exit(code if isinstance(code, int) else 0)
-
-
-class _AutoFloat(click.ParamType):  # type: ignore[type-arg]
-    """A number, or ``auto`` (None: the library chooses it from the data)."""
-
-    name = "auto|FLOAT"
-
-    def convert(self, value: Any, param: Any, ctx: Any) -> float | None:
-        if value is None or isinstance(value, float):
-            return value
-        if str(value).lower() == "auto":
-            return None
-        try:
-            return float(value)
-        except ValueError:
-            self.fail(f"{value!r} is neither 'auto' nor a number", param, ctx)
-
-
-class _NameValue(click.ParamType):  # type: ignore[type-arg]
-    """``NAME=NUMBER``, one value of a per-sensor parameter."""
-
-    def __init__(self, unit: str) -> None:
-        self.name = f"NAME={unit.upper() or 'NUMBER'}"
-
-    def convert(self, value: Any, param: Any, ctx: Any) -> tuple[str, float]:
-        if isinstance(value, tuple):
-            return value
-        name, _, number = str(value).partition("=")
-        try:
-            return name.strip(), float(number)
-        except ValueError:
-            self.fail(f"{value!r} is not {self.name}", param, ctx)
-
-
-def _click_type(hint: Any, unit: str) -> tuple[Any, bool]:
-    """The click type of a parameter field's type, and whether the option repeats."""
-    origin, args = typing.get_origin(hint), typing.get_args(hint)
-    if origin is Literal:
-        return click.Choice([str(a) for a in args]), False
-    if origin in (Mapping, dict):
-        return _NameValue(unit), True
-    if type(None) in args:
-        return _AutoFloat(), False
-    return (click.INT if hint is int else click.FLOAT), False
-
-
-def _default_text(f: dataclasses.Field[Any]) -> str:
-    if f.metadata["default_text"]:
-        return str(f.metadata["default_text"])
-    return f"{f.default:g}" if isinstance(f.default, float) else str(f.default)
-
-
-def _option_spec(
-    f: dataclasses.Field[Any], hint: Any, help_text: str, defaults: bool
-) -> tuple[list[str], dict[str, Any]]:
-    """The declarations and attributes of a parameter field's option: with ``defaults``, it
-    defaults to the field's default and shows it; without, it defaults to "not given"."""
-    kind, repeats = _click_type(hint, unit_of(f))
-    attrs: dict[str, Any] = {"type": kind, "multiple": repeats, "help": help_text}
-    if defaults:
-        attrs.update(default=() if repeats else f.default, show_default=True)
-    return [flag_of(f), f.name], attrs
-
-
-def _method_parameter_options() -> list[click.Option]:
-    """One option per parameter field of the registered methods (methods sharing a field share
-    its option, the help naming each one's default); passed on only when given."""
-    users: dict[str, list[tuple[str, dataclasses.Field[Any], Any]]] = {}
-    for name, method in METHODS.items():
-        types = hints(method.params)
-        for f in fields(method.params):
-            users.setdefault(f.name, []).append((name, f, types[f.name]))
-    options = []
-    for field_name, used in users.items():
-        _, first, hint = used[0]
-        if any(h != hint or unit_of(f) != unit_of(first) for _, f, h in used):
-            raise TypeError(f"methods disagree on the type or unit of {field_name!r}")
-        by_default: dict[str, list[str]] = {}
-        for name, f, _ in used:
-            by_default.setdefault(_default_text(f), []).append(name)
-        unit = f" [{unit_of(first)}]" if unit_of(first) else ""
-        (text, names), *rest = by_default.items()
-        said = [f"{', '.join(names)}: {first.metadata['help']}{unit} [default: {text}]"]
-        said += [f"{', '.join(names)} [default: {text}]" for text, names in rest]
-        decls, attrs = _option_spec(first, hint, "; ".join(said) + ".", defaults=False)
-        if attrs["multiple"]:
-            attrs["help"] += " Repeatable."
-        options.append(click.Option(decls, **attrs))
-    return options
-
-
-class _MethodCommand(click.Command):
-    """A command whose method options come from ``METHODS`` as it is when the command runs:
-    a method registered after import gets its ``--method`` choice and its options."""
-
-    def __init__(self, *args: Any, choose: Literal["one", "many"], **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.choose = choose
-
-    def get_params(self, ctx: click.Context) -> list[click.Parameter]:
-        *own, help_option = super().get_params(ctx)
-        chooser: list[click.Parameter] = []
-        if self.choose == "one":
-            chooser.append(
-                click.Option(
-                    ["-m", "--method"],
-                    type=click.Choice(list(METHODS)),
-                    default=DEFAULT_METHOD,
-                    show_default=True,
-                    help="Fusion method.",
-                )
-            )
-        arguments = [p for p in own if isinstance(p, click.Argument)]
-        options = [p for p in own if not isinstance(p, click.Argument)]
-        return [*arguments, *chooser, *options, *_method_parameter_options(), help_option]
-
-
-def _method_values(options: dict[str, Any]) -> dict[str, Any]:
-    """Pop the method parameters from a command's ``options``: those given, by field name."""
-    ctx = click.get_current_context()
-    values = {}
-    for option in _method_parameter_options():
-        name = str(option.name)
-        value = options.pop(name, None)
-        if ctx.get_parameter_source(name) not in (ParameterSource.DEFAULT, None):
-            values[name] = dict(value) if option.multiple else value
-    return values
 
 
 @click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
@@ -276,400 +141,6 @@ def cli(verbose: int, quiet: bool, debug: bool) -> None:  # noqa: ARG001 (read i
     root.handlers[:] = [handler]
     root.setLevel(level)
     root.propagate = False
-
-
-_LOG_ARG = click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
-_PATH = click.Path(dir_okay=False, path_type=Path)
-
-
-def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    return click.option("-o", "--output", type=_PATH, required=True, help=help_text)
-
-
-def _pipeline_options(command: Callable[..., Any]) -> Callable[..., Any]:
-    """The options every fusion run shares, from :class:`FuseOptions`' fields: clock, datum
-    and the sensors required."""
-    types = hints(FuseOptions)
-    for f in reversed(fields(FuseOptions)):
-        text = str(f.metadata["help"])
-        unit = f" [{unit_of(f)}]" if unit_of(f) else ""
-        decls, attrs = _option_spec(f, types[f.name], f"{text[0].upper()}{text[1:]}{unit}.", True)
-        command = click.option(*decls, **attrs)(command)
-    return command
-
-
-def _force_option(command: Callable[..., Any]) -> Callable[..., Any]:
-    return click.option("--force", is_flag=True, help="Overwrite existing outputs.")(command)
-
-
-def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
-    return click.option(
-        "--plot",
-        "plot_path",
-        type=_PATH,
-        help="Also draw the sensors, the fused altitude and the weights (.png or .svg).",
-    )(command)
-
-
-@cli.command(cls=_MethodCommand, choose="one")
-@_LOG_ARG
-@_output_option(
-    "The fused table to write: CSV, or Parquet for a .parquet name; the provenance goes beside "
-    "it as NAME.meta.json."
-)
-@_pipeline_options
-@click.option(
-    "--weights",
-    "weights_path",
-    type=_PATH,
-    help="Also write the weight traces (the weights and each method's diagnostics): CSV, or "
-    "Parquet for a .parquet name.",
-)
-@click.option(
-    "--meta",
-    "meta_path",
-    type=_PATH,
-    help="Where to write the provenance JSON [default: beside the fused table].",
-)
-@_plot_option
-@_force_option
-def fuse(
-    log: Path,
-    output: Path,
-    weights_path: Path | None,
-    meta_path: Path | None,
-    plot_path: Path | None,
-    force: bool,
-    **options: Any,
-) -> None:
-    """Fuse the altitude sensors of LOG into one altitude, written to a CSV.
-
-    Each method's options apply to the methods their help names.
-
-    \b
-    Example:
-      altfuse fuse flight.bin -o flight.csv
-      altfuse fuse flight.bin -o flight.csv --method mean --rate 20
-      altfuse fuse flight.bin -o flight.csv -m support --alpha 0.5 --beta 10 --weights w.csv
-      altfuse fuse flight.bin -o flight.csv --method multilayer --plot flight.png
-      altfuse fuse flight.bin -o flight.csv --method smoother --sigma gps=0.8
-      altfuse fuse flight.bin -o flight.parquet --weights weights.parquet
-    """
-    method = options.pop("method")
-    params = params_by_method(_method_values(options), [method])
-    opts = FuseOptions(method=method, params=params, **options)
-    outputs = Outputs(output, meta_path, weights_path, plot_path)
-    outputs.refuse(log, force)
-    done = fuse_to_files(log, outputs, opts)
-    run = done.run
-    for note in run.log.notes:
-        logging.getLogger("altfuse").info("%s", note)
-    warning = damage(run.log)
-    if warning:
-        logging.getLogger("altfuse").warning("%s", warning)
-    record = run.provenance["guard"]
-    if record["diverged_ticks"]:
-        lost = f", {record['lost_ticks']} of them without a value" if record["lost_ticks"] else ""
-        logging.getLogger("altfuse").warning(
-            "%s: %s left every sensor on %d ticks (by up to %.1f m%s): status 'diverged'",
-            log.name, method, record["diverged_ticks"], record["max_excursion_m"], lost,
-        )  # fmt: skip
-    counts = run.provenance["status_counts"]
-    click.echo(
-        f"{output}: {run.referred.t.size} rows, method {method}, "
-        f"sensors {', '.join(run.referred.names)}; "
-        + ", ".join(f"{k} {v}" for k, v in counts.items())
-        + f" (provenance: {done.written['meta']})"
-    )
-
-
-def _stats_line(name: str, kind: str, s: ErrorStats) -> str:
-    return (
-        f"{name:<13}{kind:<9}{s.rmse:>9.3f}{s.mae:>9.3f}{s.max_abs:>9.3f}{s.bias:>+10.3f}{s.n:>7}"
-    )
-
-
-@cli.command(cls=_MethodCommand, choose="many")
-@_LOG_ARG
-@click.option(
-    "--truth",
-    type=click.Choice(TRUTHS),
-    default="auto",
-    show_default=True,
-    help="Measure against the simulator's SIM truth, or the EKF as a reference.",
-)
-@click.option("--methods", help="Comma-separated methods to run [default: every method].")
-@click.option(
-    "--segments",
-    help="Also per segment: a length in seconds (30) or boundaries on the log's clock (50.5,62.3).",
-)
-@click.option("-o", "--output", "json_path", type=_PATH, help="Write the report as JSON.")
-@click.option("--csv", "csv_path", type=_PATH, help="Write the report as CSV.")
-@_pipeline_options
-@_plot_option
-@_force_option
-def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
-    log: Path,
-    truth: TruthChoice,
-    methods: str | None,
-    segments: str | None,
-    json_path: Path | None,
-    csv_path: Path | None,
-    plot_path: Path | None,
-    force: bool,
-    **options: Any,
-) -> None:
-    """Measure every method, every sensor and the onboard EKF against the truth in LOG.
-
-    The truth is the simulator's SIM altitude when the log has it; otherwise the autopilot's EKF
-    height stands in, labelled as a reference. Errors are in metres: RMSE, mean absolute error,
-    maximum absolute error and bias (mean of estimate - truth).
-
-    \b
-    Example:
-      altfuse evaluate sim.bin
-      altfuse evaluate flight.bin --methods support,mean --segments 30 -o report.json
-      altfuse evaluate flight.bin --methods support --alpha 0.5
-      altfuse evaluate flight.bin --plot flight.png --csv report.csv
-    """
-    if plot_path is not None:
-        check_plot_path(plot_path)
-    check_paths([json_path, csv_path, plot_path], [log])
-    refuse_existing(force, json_path, csv_path, plot_path)
-    chosen = [m.strip() for m in (methods or ",".join(METHODS)).split(",") if m.strip()]
-    params = params_by_method(_method_values(options), chosen)
-    result = evaluate_log(log, chosen, FuseOptions(params=params, **options), truth, segments)
-    t = result.prepared.referred.t
-    click.echo(
-        f"{log.name}: measured against {result.truth.label}, {t.size} ticks "
-        f"({t[0]:.1f}-{t[-1]:.1f} s), errors in m"
-    )
-    header = f"{'name':<13}{'kind':<9}{'RMSE':>9}{'MAE':>9}{'max':>9}{'bias':>10}{'n':>7}"
-    click.echo(header)
-    for row in result.rows:
-        click.echo(_stats_line(row.name, row.kind, row.overall))
-    for label in result.segments:
-        click.echo(f"segment {label}:")
-        for row in result.rows:
-            click.echo(_stats_line(row.name, row.kind, row.segments[label]))
-    for method, why in result.failed.items():
-        click.echo(f"not run: {method}: {why}")
-    for method, found in result.diverged().items():
-        click.echo(
-            f"diverged: {method} left every sensor on {found['diverged_ticks']} ticks "
-            f"(by up to {found['max_excursion_m']:.1f} m)"
-        )
-    with atomic_outputs() as stage:
-        if json_path is not None:
-            stage(json_path, write_json(result.as_dict()))
-        if csv_path is not None:
-            stage(csv_path, lambda f: evaluation_table(result).to_csv(f, index=False))
-        if plot_path is not None and result.runs:
-            fused = {m: r.result.fused for m, r in result.runs.items()}
-            best = result.best()
-            title = f"{log.name}: {', '.join(fused)} (weights: {best}, the lowest RMSE)"
-            fig = run_figure(result.runs[best], fused, result.truth, title)
-            stage(plot_path, writer(fig, plot_path), binary=True)
-
-
-class _Progress:
-    """done / failed / remaining / ETA on one line of stderr, only when stderr is a terminal."""
-
-    def __init__(self) -> None:
-        self.enabled = sys.stderr.isatty()
-        self.started = time.monotonic()
-        self.done = self.failed = 0
-
-    def __call__(self, result: LogResult, total: int) -> None:
-        self.done += 1
-        self.failed += result.status == "failed"
-        if not self.enabled:
-            return
-        elapsed = time.monotonic() - self.started
-        left = total - self.done
-        eta = elapsed / self.done * left
-        click.echo(
-            f"\rdone {self.done}/{total}, failed {self.failed}, remaining {left}, "
-            f"ETA {int(eta) // 60}:{int(eta) % 60:02d}  ",
-            err=True,
-            nl=left == 0,
-        )
-
-
-@cli.command(cls=_MethodCommand, choose="one")
-@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option(
-    "-o",
-    "--output",
-    type=click.Path(file_okay=False, path_type=Path),
-    required=True,
-    help="The folder for every log's outputs (mirroring the input tree) and summary.csv.",
-)
-@click.option(
-    "--pattern",
-    default="*.bin",
-    show_default=True,
-    help="File names to take, whatever their case (.bin and .BIN).",
-)
-@click.option(
-    "-j",
-    "--jobs",
-    type=int,
-    default=None,
-    help="Logs run at once in local processes [default: the number of cores].",
-)
-@click.option("--scheduler", help="Run on this Dask scheduler (tcp://host:8786) instead.")
-@click.option(
-    "--skip-existing",
-    is_flag=True,
-    help="Skip logs whose outputs are complete for this input and these options.",
-)
-@_pipeline_options
-@click.option(
-    "--format",
-    "table_format",
-    type=click.Choice(["csv", "parquet"]),
-    default="csv",
-    show_default=True,
-    help="Format of each log's fused table (and weight traces).",
-)
-@click.option("--weights", is_flag=True, help="Also write each log's weight traces.")
-@click.option(
-    "--plot",
-    "plot_format",
-    type=click.Choice(["png", "svg"]),
-    help="Also draw each log's figure in this format.",
-)
-@click.option(
-    "--evaluate",
-    "with_evaluation",
-    is_flag=True,
-    help="Also evaluate every method on each log (metrics in the summary).",
-)
-@_force_option
-def batch(  # noqa: PLR0913 (one argument per option: click's way)
-    paths: tuple[Path, ...],
-    output: Path,
-    pattern: str,
-    jobs: int | None,
-    scheduler: str | None,
-    skip_existing: bool,
-    table_format: TableFormat,
-    weights: bool,
-    plot_format: PlotFormat | None,
-    with_evaluation: bool,
-    force: bool,
-    **options: Any,
-) -> None:
-    """Fuse every log under PATHS (folders searched recursively) into OUTPUT, in parallel.
-
-    Each log's outputs go under OUTPUT, mirroring the input tree; OUTPUT/summary.csv has one row
-    per log: status (ok, skipped, failed), the error, duration, sensors, samples, and with
-    --evaluate each method's RMSE and maximum error. The method options are fuse's; with
-    --evaluate they apply to every method evaluated that takes them. Exit code 0 when every log
-    succeeded, 4 when some failed.
-
-    \b
-    Example:
-      altfuse batch logs/ -o results/
-      altfuse batch logs/ more/flight.bin -o results/ --jobs 2 --evaluate --plot png
-      altfuse batch logs/ -o results/ --skip-existing
-      altfuse batch logs/ -o results/ --format parquet
-      altfuse batch logs/ -o results/ -m support --alpha 0.5
-      altfuse batch logs/ -o results/ --scheduler tcp://10.0.0.5:8786
-    """
-    method = options.pop("method")
-    evaluated = list(METHODS) if with_evaluation else [method]
-    params = params_by_method(_method_values(options), evaluated)
-    settings = BatchOptions(
-        fuse=FuseOptions(method=method, params=params, **options),
-        format=table_format,
-        weights=weights,
-        plot=plot_format,
-        evaluate=with_evaluation,
-        skip_existing=skip_existing,
-        force=force,
-    )
-    progress = _Progress()
-    results = run_batch(
-        paths, output, settings, pattern=pattern, jobs=jobs, scheduler=scheduler, on_result=progress
-    )
-    counts = {s: sum(r.status == s for r in results) for s in ("ok", "skipped", "failed")}
-    click.echo(
-        f"{output / SUMMARY}: {len(results)} logs, "
-        + ", ".join(f"{k} {v}" for k, v in counts.items())
-    )
-    if counts["failed"]:
-        sys.exit(EXIT_PARTIAL)
-
-
-@cli.command()
-@_LOG_ARG
-@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def info(log: Path, as_json: bool) -> None:
-    """Show what LOG holds: vehicle, duration, altitude sources, references.
-
-    \b
-    Example:
-      altfuse info flight.bin
-      altfuse info flight.bin --json
-    """
-    summary = describe(read_log(log))
-    if as_json:
-        click.echo(json.dumps(summary, indent=2))
-        return
-    for line in as_text(summary):
-        click.echo(line)
-
-
-@cli.command()
-@click.argument("scenario", type=click.Choice(list(SCENARIOS)))
-@_output_option("The DataFlash log to write.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
-@click.option(
-    "--duration",
-    "duration_s",
-    type=float,
-    default=None,
-    help="Flight duration [s] [default: the scenario's].",
-)
-@click.option(
-    "--fault",
-    "faults",
-    type=click.Choice(FAULTS),
-    multiple=True,
-    help="Add a fault (repeatable).",
-)
-@_force_option
-def simulate(
-    scenario: str,
-    output: Path,
-    seed: int,
-    duration_s: float | None,
-    faults: tuple[str, ...],
-    force: bool,
-) -> None:
-    """Write a simulated SCENARIO flight as a DataFlash log, with the truth in SIM records.
-
-    \b
-    Scenarios:
-      paper-a  Paper A's experiment: level flight near 15 m, the barometer
-               departing, then every sensor scattering (75 s)
-      hover    Paper B's experiment: a climb to 240 m and a hover (180 s)
-      mission  take-off, climb, cruise over hills, landing (120 s)
-
-    GPS (5 Hz, 0.2 s lag, AMSL), barometer (20 Hz, drifting with temperature), rangefinder
-    (20 Hz, Stat and out-of-range codes), IMU (50 Hz, biased) and attitude (10 Hz).
-
-    \b
-    Example:
-      altfuse simulate mission -o mission.bin --seed 1 --duration 180
-      altfuse simulate hover -o hover.bin --fault gps-glitch --fault lose-baro
-    """
-    refuse_existing(force, output)
-    flight = simulate_flight(scenario, seed=seed, duration_s=duration_s, faults=faults)
-    n = write_simulated_log(flight, output)
-    click.echo(f"{output}: {scenario}, {n} records, {flight.duration_s:g} s, seed {seed}")
 
 
 def main() -> None:

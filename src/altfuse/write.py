@@ -3,7 +3,8 @@
 Every file is written to a temporary file beside its target and renamed into place only when all
 of them are complete, all or none, so a failure never leaves a half-written output or an output
 without its sidecar behind; no output may be an input of the run or another of its outputs
-(:func:`check_paths`); SIGTERM, like SIGINT, removes the temporary files (:class:`Terminated`).
+(:func:`check_paths`); SIGTERM, like SIGINT, removes the temporary files
+(:class:`altfuse.signals.Terminated`).
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ import errno
 import glob
 import json
 import os
-import signal
 import socket
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
@@ -180,36 +180,6 @@ def remove_stale_temporaries(folder: Path, name: str = "*", recursive: bool = Fa
                 path.unlink()
                 removed += 1
     return removed
-
-
-#: The exit code after SIGTERM (128 + the signal, as a shell reports it).
-EXIT_TERMINATED = 128 + signal.SIGTERM
-
-
-class Terminated(BaseException):
-    """SIGTERM, raised where the process is (as SIGINT raises KeyboardInterrupt), so that the
-    temporary files of :func:`atomic_outputs` are removed on the way out."""
-
-
-def _terminated(_signum: int, _frame: object) -> None:
-    raise Terminated
-
-
-def interruption(exc: BaseException) -> BaseException | None:
-    """The KeyboardInterrupt or :class:`Terminated` that ``exc`` is or hides: a signal that
-    arrives inside a numba-compiled loop surfaces, when the loop returns, as a SystemError
-    caused by the handler's exception."""
-    seen: BaseException | None = exc
-    while seen is not None:
-        if isinstance(seen, KeyboardInterrupt | Terminated):
-            return seen
-        seen = seen.__cause__ if isinstance(seen, SystemError) else None
-    return None
-
-
-def raise_on_sigterm() -> None:
-    """Make SIGTERM raise :class:`Terminated` in this process (its main thread)."""
-    signal.signal(signal.SIGTERM, _terminated)
 
 
 def _umask() -> int:
