@@ -19,5 +19,6 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def compiled(function: F) -> F:
-    """``function`` compiled to machine code (nopython mode, cached)."""
-    return cast(F, numba.njit(cache=True)(function))
+    """``function`` compiled to machine code (nopython mode, cached), releasing the GIL while
+    it runs (the reader hashes the file in a thread meanwhile)."""
+    return cast(F, numba.njit(cache=True, nogil=True)(function))

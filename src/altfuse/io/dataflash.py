@@ -33,6 +33,7 @@ from __future__ import annotations
 import logging
 import re
 from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -598,10 +599,19 @@ def read_dataflash(path: str | Path) -> FlightLog:
         pymavlink cannot open the file as a DataFlash log.
     """
     path = Path(path)
-    try:
-        rec = _Records(index_file(path))
-    except OSError as exc:
-        raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
+    # the file's sha256 in a thread, while the index is made: hashlib and the compiled loops let
+    # go of the GIL (a separate pass was 0.22 s of 1.16 s on a 300 MB log)
+    with ThreadPoolExecutor(1, thread_name_prefix="altfuse-sha256") as pool:
+        digest = pool.submit(sha256_of, path)
+        try:
+            rec = _Records(index_file(path))
+        except OSError as exc:
+            raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
+        return _flight(path, rec, digest)
+
+
+def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
+    """The flight in ``rec``, the log at ``path`` whose sha256 ``digest`` is computing."""
     b = _Builder(rec)
     _read_gps(b)
     have_baro = _read_baro(b)
@@ -620,7 +630,7 @@ def read_dataflash(path: str | Path) -> FlightLog:
             b.dropped_sources.setdefault(what, f"not read: {problem}")
     return FlightLog(
         path=str(path),
-        sha256=sha256_of(path),
+        sha256=digest.result(),
         size_bytes=rec.index.size,
         vehicle=vehicle,
         firmware=firmware,
