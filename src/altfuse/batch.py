@@ -31,17 +31,23 @@ import time
 from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Literal, get_args
 
 import pandas as pd
 
-from altfuse.errors import AltfuseError, LogReadError, ParameterError
+from altfuse.errors import (
+    AltfuseError,
+    LogReadError,
+    NoUsableSensorsError,
+    ParameterError,
+    UnsupportedLogError,
+)
 from altfuse.io import sha256_of
-from altfuse.job import Outputs, fuse_to_files
+from altfuse.job import FileRun, Outputs, fuse_to_files
 from altfuse.params import InvalidParameter
-from altfuse.pipeline import FuseOptions
+from altfuse.pipeline import FuseOptions, FuseRun
 from altfuse.signals import EXIT_TERMINATED, Terminated, interruption
 from altfuse.write import (
     TableFormat,
@@ -57,7 +63,11 @@ EXIT_PARTIAL = 4
 
 PlotFormat = Literal["png", "svg"]
 #: A log's outcome in the summary.
-Outcome = Literal["ok", "skipped", "failed"]
+#: ``refused``: the log is valid but not fusable (too few altitude sources, an ArduSub depth
+#: log), not a failure; ``failed``: an error (unreadable, damaged, an output in the way, a bug).
+Outcome = Literal["ok", "refused", "skipped", "failed"]
+#: Errors that refuse a log rather than fail it.
+REFUSALS = (NoUsableSensorsError, UnsupportedLogError)
 
 
 @dataclass(frozen=True)
@@ -103,17 +113,62 @@ class Job:
 
 @dataclass(frozen=True)
 class LogResult:
-    """One row of the summary."""
+    """One row of the summary (README: "batch")."""
 
     log: str
     status: Outcome  # "skipped": complete outputs found
     error: str = ""
-    duration_s: float = 0.0
+    flight_s: float | None = None  # the sensors' span on the log's clock
+    processing_s: float = 0.0  # this log's run, reading to writing
+    vehicle: str = ""
+    firmware: str = ""
     sensors: str = ""
-    samples: int = 0
+    samples: int = 0  # ticks of the clock
+    notes: int = 0  # the reader's notes on the log (damage, types not read, stuck runs)
+    skipped_bytes: int = 0  # bytes not part of any decodable record
+    takeoff_found: bool | None = None
+    fused_share: float | None = None  # of the ticks, those with a fused value
     diverged: int = 0  # ticks whose fused value left every sensor (altfuse.guard)
+    max_excursion_m: float | None = None  # the largest gap from the fused value to a sensor
     truth: str = ""
     metrics: dict[str, float | None] = field(default_factory=dict)
+
+
+def _described(name: str, run: FuseRun, seconds: float, done: FileRun) -> LogResult:
+    """The summary row of a run written to files."""
+    record = run.provenance
+    counts, clock, guarded = record["status_counts"], record["clock"], record["guard"]
+    ticks = max(int(run.referred.t.size), 1)
+    metrics: dict[str, float | None] = {}
+    label = ""
+    if done.evaluation is not None:
+        truth = done.evaluation.truth
+        label = truth.source + (" (reference)" if truth.is_reference else "")
+        for row in done.evaluation.rows:
+            stats = row.overall.as_dict()
+            metrics[f"{row.name}_rmse"] = stats["rmse"]
+            metrics[f"{row.name}_max"] = stats["max_abs"]
+        for method, found in done.evaluation.diverged().items():
+            metrics[f"{method}_diverged"] = found["diverged_ticks"]
+    valued = sum(counts.get(s, 0) for s in ("fused", "single", "equal", "inertial"))
+    return LogResult(
+        name,
+        "ok",
+        flight_s=round(float(clock["end_s"] - clock["start_s"]), 3),
+        processing_s=seconds,
+        vehicle=record["input"]["vehicle"],
+        firmware=record["input"]["firmware"],
+        sensors=" ".join(run.referred.names),
+        samples=int(run.referred.t.size),
+        notes=len(record["input"]["notes"]),
+        skipped_bytes=int(record["input"]["skipped_bytes"]),
+        takeoff_found=record["datum"]["takeoff_s"] is not None,
+        fused_share=round(valued / ticks, 4),
+        diverged=int(guarded["diverged_ticks"]),
+        max_excursion_m=guarded["max_excursion_m"],
+        truth=label,
+        metrics=metrics,
+    )
 
 
 def find_logs(paths: Sequence[str | Path], pattern: str = "*.bin") -> list[tuple[Path, Path]]:
@@ -189,46 +244,27 @@ def process(job: Job, options: BatchOptions) -> LogResult:
     started = time.perf_counter()
     name = printable(str(job.relative))
     if options.skip_existing and is_complete(job, options):
-        return LogResult(name, "skipped", duration_s=time.perf_counter() - started)
+        return LogResult(name, "skipped", processing_s=time.perf_counter() - started)
     outputs = job.outputs(options)
     existing = [p for p in outputs.paths() if p.exists()]
     if existing and not options.force:
         message = (
             f"{existing[0]} exists; --force overwrites, --skip-existing keeps complete outputs"
         )
-        return LogResult(name, "failed", message, time.perf_counter() - started)
+        return LogResult(name, "failed", message, processing_s=time.perf_counter() - started)
     try:
         done = fuse_to_files(job.log, outputs, options.fuse, label=str(job.relative))
-        metrics: dict[str, float | None] = {}
-        label = ""
-        if done.evaluation is not None:
-            truth = done.evaluation.truth
-            label = truth.source + (" (reference)" if truth.is_reference else "")
-            for row in done.evaluation.rows:
-                stats = row.overall.as_dict()
-                metrics[f"{row.name}_rmse"] = stats["rmse"]
-                metrics[f"{row.name}_max"] = stats["max_abs"]
-            for method, found in done.evaluation.diverged().items():
-                metrics[f"{method}_diverged"] = found["diverged_ticks"]
-        run = done.run
-        return LogResult(
-            name,
-            "ok",
-            duration_s=time.perf_counter() - started,
-            sensors=" ".join(run.referred.names),
-            samples=int(run.referred.t.size),
-            diverged=int(run.provenance["guard"]["diverged_ticks"]),
-            truth=label,
-            metrics=metrics,
-        )
+        return _described(name, done.run, time.perf_counter() - started, done)
+    except REFUSALS as exc:
+        return LogResult(name, "refused", str(exc), processing_s=time.perf_counter() - started)
     except AltfuseError as exc:
-        return LogResult(name, "failed", str(exc), time.perf_counter() - started)
+        return LogResult(name, "failed", str(exc), processing_s=time.perf_counter() - started)
     except Exception as exc:  # a bug must not stop the batch either; the row names it
         signalled = interruption(exc)
         if signalled is not None:  # a signal inside compiled code: still a signal
             raise signalled from None
         message = f"internal error: {type(exc).__name__}: {exc}"
-        return LogResult(name, "failed", message, time.perf_counter() - started)
+        return LogResult(name, "failed", message, processing_s=time.perf_counter() - started)
 
 
 @dataclass
@@ -381,10 +417,10 @@ def write_summary(
             for k, v in asdict(r).items()
             if k != "metrics"
         }
-        row["duration_s"] = round(r.duration_s, 3)
+        row["processing_s"] = round(r.processing_s, 3)
         row.update(r.metrics)
         rows.append(row)
-    columns = ["log", "status", "error", "duration_s", "sensors", "samples", "diverged", "truth"]
+    columns = [f.name for f in fields(LogResult) if f.name != "metrics"]
     table = pd.DataFrame.from_records(rows, columns=columns if not rows else None)
     if previous is not None and not previous.empty:
         earlier = previous.drop_duplicates("log", keep="last").set_index("log", drop=False)

@@ -11,12 +11,20 @@ import time
 import typing
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 import click
 from click.core import ParameterSource
 
-from altfuse.batch import EXIT_PARTIAL, SUMMARY, BatchOptions, LogResult, PlotFormat, run_batch
+from altfuse.batch import (
+    EXIT_PARTIAL,
+    SUMMARY,
+    BatchOptions,
+    LogResult,
+    Outcome,
+    PlotFormat,
+    run_batch,
+)
 from altfuse.evaluation import TRUTHS, TruthChoice, evaluation_table
 from altfuse.evaluation import evaluate as evaluate_log
 from altfuse.fuse import DEFAULT_METHOD, METHODS, params_by_method
@@ -463,10 +471,12 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
     """Fuse every log under PATHS (folders searched recursively) into OUTPUT, in parallel.
 
     Each log's outputs go under OUTPUT, mirroring the input tree; OUTPUT/summary.csv has one row
-    per log: status (ok, skipped, failed), the error, duration, sensors, samples, and with
-    --evaluate each method's RMSE and maximum error. The method options are fuse's; with
-    --evaluate they apply to every method evaluated that takes them. Exit code 0 when every log
-    succeeded, 4 when some failed.
+    per log: status (ok; refused: valid but not fusable, with the reason; skipped; failed: an
+    error), the flight's and the processing's seconds, vehicle, sensors, the reader's notes,
+    the share of ticks fused, divergences, and with --evaluate each method's RMSE and maximum
+    error. The method options are fuse's; with --evaluate they apply to every method evaluated
+    that takes them. Exit code 0 when no log failed (refusals are not failures), 4 when some
+    failed, 1 or 2 when the batch itself cannot run.
 
     \b
     Example:
@@ -493,7 +503,7 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
     results = run_batch(
         paths, output, settings, pattern=pattern, jobs=jobs, scheduler=scheduler, on_result=progress
     )
-    counts = {s: sum(r.status == s for r in results) for s in ("ok", "skipped", "failed")}
+    counts = {s: sum(r.status == s for r in results) for s in get_args(Outcome)}
     click.echo(
         f"{output / SUMMARY}: {len(results)} logs, "
         + ", ".join(f"{k} {v}" for k, v in counts.items())
