@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fcntl
 import filecmp
 import json
 import os
@@ -283,3 +284,33 @@ def test_a_failed_log_exits_4_and_a_refused_one_does_not(tmp_path: Path) -> None
     summary = pd.read_csv(tmp_path / "out" / "summary.csv").set_index("log")
     assert summary.status.to_dict() == {"bad.bin": "failed", "good.bin": "ok"}
     assert "2 logs, ok 1, refused 0, skipped 0, failed 1" in result.stdout
+
+
+def test_the_shards_of_a_job_array_cover_every_log_once(tmp_path: Path) -> None:
+    """Issue 17: --shard 1/2 and 2/2 side by side in one folder (their shared lock refuses a
+    whole batch meanwhile), each with its summary; the two summaries hold every log once."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in ("a", "b", "c", "d", "e"):
+        shutil.copy(SAMPLES / "hover.bin", logs / f"{name}.bin")
+    out = tmp_path / "out"
+    out.mkdir()
+    fd = os.open(out, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_SH)  # another shard, still running
+    try:
+        with pytest.raises(ParameterError, match="another altfuse batch is writing"):
+            run_batch([logs], out, jobs=1)
+        first = run_batch([logs], out, jobs=1, shard=(1, 2))
+    finally:
+        os.close(fd)
+    result = CliRunner().invoke(cli, ["batch", str(logs), "-o", str(out), "--shard", "2/2"])
+    assert result.exit_code == 0, result.output
+    assert "summary.shard-2-of-2.csv: 2 logs" in result.stdout
+    one = pd.read_csv(out / "summary.shard-1-of-2.csv")
+    two = pd.read_csv(out / "summary.shard-2-of-2.csv")
+    assert [r.log for r in first] == one.log.tolist() == ["a.bin", "c.bin", "e.bin"]
+    assert two.log.tolist() == ["b.bin", "d.bin"]
+    assert not (out / "summary.csv").exists()
+    bad = CliRunner().invoke(cli, ["batch", str(logs), "-o", str(out), "--shard", "3/2"])
+    assert bad.exit_code == 2
+    assert "'3/2' is not I/N with 1 <= I <= N" in bad.output

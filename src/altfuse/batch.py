@@ -435,14 +435,15 @@ def write_summary(
 
 
 @contextlib.contextmanager
-def _locked(out: Path) -> Iterator[None]:
+def _locked(out: Path, shared: bool = False) -> Iterator[None]:
     """Hold a lock on the output folder itself (``flock`` on its descriptor: no lock file left
-    behind) for the batch, or refuse when another batch holds it."""
+    behind) for the batch, or refuse when another batch holds it. The shards of one batch
+    (``shared``) hold it together, each writing its own logs and summary."""
     out.mkdir(parents=True, exist_ok=True)
     fd = os.open(out, os.O_RDONLY)
     try:
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
         except BlockingIOError as exc:
             raise ParameterError(
                 f"another altfuse batch is writing to {out}; wait for it, or choose another -o"
@@ -461,21 +462,30 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
     jobs: int | None = None,
     scheduler: str | None = None,
     on_result: Callable[[LogResult, int], None] | None = None,
+    shard: tuple[int, int] | None = None,
 ) -> list[LogResult]:
     """Run every log under ``paths`` into ``out_dir``; return one result per log.
 
-    ``on_result(result, total)`` is called as each log finishes (for progress).
+    ``on_result(result, total)`` is called as each log finishes (for progress). With ``shard``
+    ``(i, n)``, only every n-th log of the sorted list from the i-th (1-based): the n shards of
+    a job array cover every log once, side by side in one ``out_dir``, each with its own
+    summary (:func:`summary_name`).
     """
     options = options or BatchOptions()
     workers = (os.cpu_count() or 1) if jobs is None else jobs
     if workers < 1:
         raise InvalidParameter("jobs", f"must be at least 1, got {workers}")
+    if shard is not None and not 1 <= shard[0] <= shard[1]:
+        raise InvalidParameter("shard", f"must be I/N with 1 <= I <= N, got {shard[0]}/{shard[1]}")
     todo = plan(paths, out_dir, pattern)
     if not todo:
         raise LogReadError(f"no file matching {pattern!r} under {', '.join(map(str, paths))}")
+    if shard is not None:
+        todo = todo[shard[0] - 1 :: shard[1]]
     out = Path(out_dir)
-    with _locked(out):
-        previous = None if options.force else _previous_summary(out / SUMMARY)
+    summary = out / summary_name(shard)
+    with _locked(out, shared=shard is not None):
+        previous = None if options.force else _previous_summary(summary)
         remove_stale_temporaries(out, recursive=True)
         results = []
         stream = _dask(todo, options, scheduler) if scheduler else _local(todo, options, workers)
@@ -483,5 +493,10 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
             results.append(result)
             if on_result is not None:
                 on_result(result, len(todo))
-        write_summary(results, out / SUMMARY, previous)
+        write_summary(results, summary, previous)
     return results
+
+
+def summary_name(shard: tuple[int, int] | None = None) -> str:
+    """``summary.csv``, or a shard's ``summary.shard-I-of-N.csv``."""
+    return SUMMARY if shard is None else f"summary.shard-{shard[0]}-of-{shard[1]}.csv"

@@ -18,12 +18,12 @@ from click.core import ParameterSource
 
 from altfuse.batch import (
     EXIT_PARTIAL,
-    SUMMARY,
     BatchOptions,
     LogResult,
     Outcome,
     PlotFormat,
     run_batch,
+    summary_name,
 )
 from altfuse.evaluation import TRUTHS, TruthChoice, evaluation_table
 from altfuse.evaluation import evaluate as evaluate_log
@@ -72,6 +72,24 @@ class _AutoFloat(click.ParamType):  # type: ignore[type-arg]
             return float(value)
         except ValueError:
             self.fail(f"{value!r} is neither 'auto' nor a number", param, ctx)
+
+
+class _Shard(click.ParamType):  # type: ignore[type-arg]
+    """``I/N``: the I-th of N shards (1-based)."""
+
+    name = "I/N"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> tuple[int, int]:
+        if isinstance(value, tuple):
+            return value
+        i, slash, n = str(value).partition("/")
+        try:
+            shard = int(i), int(n)
+        except ValueError:
+            shard = (0, 0)
+        if not slash or not 1 <= shard[0] <= shard[1]:
+            self.fail(f"{value!r} is not I/N with 1 <= I <= N (such as 2/8)", param, ctx)
+        return shard
 
 
 class _NameValue(click.ParamType):  # type: ignore[type-arg]
@@ -433,6 +451,12 @@ class _Progress:
 )
 @_pipeline_options
 @click.option(
+    "--shard",
+    type=_Shard(),
+    help="Only every N-th log of the sorted list, from the I-th: the N shards of a job array "
+    "cover every log once (each writes summary.shard-I-of-N.csv).",
+)
+@click.option(
     "--format",
     "table_format",
     type=click.Choice(["csv", "parquet"]),
@@ -461,6 +485,7 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
     jobs: int | None,
     scheduler: str | None,
     skip_existing: bool,
+    shard: tuple[int, int] | None,
     table_format: TableFormat,
     weights: bool,
     plot_format: PlotFormat | None,
@@ -484,6 +509,7 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
       altfuse batch logs/ more/flight.bin -o results/ --jobs 2 --evaluate --plot png
       altfuse batch logs/ -o results/ --skip-existing
       altfuse batch logs/ -o results/ --format parquet
+      altfuse batch logs/ -o results/ --shard 3/8     # job 3 of an array of 8
       altfuse batch logs/ -o results/ -m support --alpha 0.5
       altfuse batch logs/ -o results/ --scheduler tcp://10.0.0.5:8786
     """
@@ -501,11 +527,18 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
     )
     progress = _Progress()
     results = run_batch(
-        paths, output, settings, pattern=pattern, jobs=jobs, scheduler=scheduler, on_result=progress
+        paths,
+        output,
+        settings,
+        pattern=pattern,
+        jobs=jobs,
+        scheduler=scheduler,
+        on_result=progress,
+        shard=shard,
     )
     counts = {s: sum(r.status == s for r in results) for s in get_args(Outcome)}
     click.echo(
-        f"{output / SUMMARY}: {len(results)} logs, "
+        f"{output / summary_name(shard)}: {len(results)} logs, "
         + ", ".join(f"{k} {v}" for k, v in counts.items())
     )
     if counts["failed"]:
