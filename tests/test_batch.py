@@ -17,6 +17,7 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
+from altfuse import __version__
 from altfuse.batch import EXIT_PARTIAL, BatchOptions, find_logs, run_batch
 from altfuse.cli import cli
 from altfuse.errors import LogReadError, ParameterError
@@ -29,11 +30,12 @@ SAMPLES = ROOT / "sample_logs"
 
 
 def outputs(folder: Path) -> dict[str, Path]:
-    """Every per-log output under ``folder`` (not the summary, whose durations vary)."""
+    """Every per-log output under ``folder`` (not the summary, whose durations vary, nor the
+    index, which names the scheduler's options)."""
     return {
         str(p.relative_to(folder)): p
         for p in sorted(folder.rglob("*"))
-        if p.is_file() and p.name != "summary.csv"
+        if p.is_file() and p.name not in ("summary.csv", "index.json")
     }
 
 
@@ -131,6 +133,7 @@ def test_evaluate_and_plot_in_a_batch(tmp_path: Path) -> None:
     )
     assert [r.status for r in results] == ["ok"]
     assert sorted(p.name for p in out.iterdir()) == [
+        "index.json",
         "paper_a.csv",
         "paper_a.evaluation.json",
         "paper_a.meta.json",
@@ -314,3 +317,31 @@ def test_the_shards_of_a_job_array_cover_every_log_once(tmp_path: Path) -> None:
     bad = CliRunner().invoke(cli, ["batch", str(logs), "-o", str(out), "--shard", "3/2"])
     assert bad.exit_code == 2
     assert "'3/2' is not I/N with 1 <= I <= N" in bad.output
+
+
+def test_the_index_says_what_made_each_log_s_outputs(tmp_path: Path) -> None:
+    """Issue 17: index.json beside the summary, per log the altfuse version and fusion options
+    its outputs were made with; a log that fails on a rerun keeps its entry (its outputs are
+    still there), the failure said under ``rerun``."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    shutil.copy(SAMPLES / "hover.bin", logs / "a.bin")
+    shutil.copy(SAMPLES / "paper_a.bin", logs / "b.bin")
+    out = tmp_path / "out"
+    run_batch([logs], out, jobs=1)
+    first = json.loads((out / "index.json").read_text())
+    assert first["altfuse_version"] == __version__
+    assert first["options"]["fuse"]["method"] == "smoother"
+    assert first["logs"]["a.bin"]["outputs"] == ["a.csv", "a.meta.json"]
+    assert first["logs"]["a.bin"]["fuse"]["method"] == "smoother"
+    # another method over the same folder without --force: a.bin's outputs are in the way
+    again = run_batch([logs / "a.bin"], out, BatchOptions(fuse=FuseOptions(method="mean")))
+    assert [r.status for r in again] == ["failed"]
+    index = json.loads((out / "index.json").read_text())
+    assert index["logs"]["a.bin"]["fuse"]["method"] == "smoother"  # what made the files
+    assert index["logs"]["a.bin"]["rerun"]["status"] == "failed"
+    assert index["logs"]["a.bin"]["rerun"]["fuse"]["method"] == "mean"
+    assert index["logs"]["b.bin"] == first["logs"]["b.bin"]
+    run_batch([logs], out, jobs=1, shard=(2, 2))
+    shard = json.loads((out / "index.shard-2-of-2.json").read_text())
+    assert list(shard["logs"]) == ["b.bin"]

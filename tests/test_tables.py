@@ -113,8 +113,8 @@ def test_a_batch_writes_parquet_and_resumes_on_it(tmp_path: Path) -> None:
     first = run_batch([SAMPLE_LOG], tmp_path / "out", options)
     assert [r.status for r in first] == ["ok"]
     written = sorted(p.name for p in (tmp_path / "out").iterdir())
-    assert written == ["mission.meta.json", "mission.parquet", "mission.weights.parquet",
-                       "summary.csv"]  # fmt: skip
+    assert written == ["index.json", "mission.meta.json", "mission.parquet",
+                       "mission.weights.parquet", "summary.csv"]  # fmt: skip
     again = run_batch([SAMPLE_LOG], tmp_path / "out", BatchOptions(format="parquet", weights=True,
                                                                   skip_existing=True))  # fmt: skip
     assert [r.status for r in again] == ["skipped"]

@@ -37,6 +37,7 @@ from typing import Any, Literal, get_args
 
 import pandas as pd
 
+from altfuse import __version__
 from altfuse.errors import (
     AltfuseError,
     LogReadError,
@@ -53,6 +54,7 @@ from altfuse.write import (
     TableFormat,
     atomic_outputs,
     remove_stale_temporaries,
+    write_json,
 )
 
 SUMMARY = "summary.csv"
@@ -494,9 +496,43 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
             if on_result is not None:
                 on_result(result, len(todo))
         write_summary(results, summary, previous)
+        index = out / summary_name(shard).replace("summary", "index").replace(".csv", ".json")
+        write_index(results, todo, options, index)
     return results
 
 
 def summary_name(shard: tuple[int, int] | None = None) -> str:
     """``summary.csv``, or a shard's ``summary.shard-I-of-N.csv``."""
     return SUMMARY if shard is None else f"summary.shard-{shard[0]}-of-{shard[1]}.csv"
+
+
+def write_index(
+    results: Sequence[LogResult], jobs: Sequence[Job], options: BatchOptions, path: Path
+) -> None:
+    """``index.json`` beside the summary: the altfuse version and the batch's options, and per
+    log the version and fusion options its outputs (relative to the folder) were made with and
+    its status. Logs of an earlier index not run now keep their entries, and so do logs that
+    fail now, their failure under ``rerun``: the index describes the files there, and a later
+    run (or a person) tells from it what must be redone."""
+    folder = path.parent
+    by_name = {printable(str(job.relative)): job for job in jobs}
+    run_with = {"altfuse_version": __version__, "fuse": asdict(options.fuse)}
+    logs: dict[str, Any] = {}
+    if not options.force:  # as the summary: --force replaces it
+        with contextlib.suppress(OSError, ValueError, TypeError, KeyError):  # none, or damaged
+            logs.update(json.loads(path.read_text(encoding="utf-8"))["logs"])
+    for r in results:
+        if r.status in ("ok", "skipped"):
+            outputs = [os.path.relpath(o, folder) for o in by_name[r.log].outputs(options).paths()]
+            logs[r.log] = {**run_with, "status": r.status, "outputs": outputs}
+        elif r.log in logs:  # its earlier outputs are still there: said, with this failure
+            logs[r.log]["rerun"] = {**run_with, "status": r.status, "error": r.error}
+        else:
+            logs[r.log] = {**run_with, "status": r.status, "error": r.error, "outputs": []}
+    record = {
+        "altfuse_version": __version__,
+        "options": asdict(options),
+        "logs": dict(sorted(logs.items())),
+    }
+    with atomic_outputs() as stage:
+        stage(path, write_json(record))
