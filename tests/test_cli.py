@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import hashlib
+import io
 import json
+import logging
 import subprocess
 import sys
 from pathlib import Path
@@ -282,3 +284,31 @@ def test_help_and_version_load_nothing_heavy(argv: list[str]) -> None:
         [sys.executable, "-c", code, *argv], capture_output=True, text=True, check=True
     )
     assert done.stdout.strip().splitlines()[-1] == "[]"
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_a_progress_line_on_a_terminal_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 17: a long single run says what it does on one line of stderr, overwritten step
+    by step and cleared at the end, only where stderr is a terminal."""
+    from altfuse import commands
+
+    logging.getLogger("altfuse").setLevel(logging.WARNING)
+    for stream, expected in ((_Terminal(), True), (io.StringIO(), False)):
+        monkeypatch.setattr(sys, "stderr", stream)
+        with commands._progress_line():
+            logging.getLogger("altfuse.progress").info("flight.bin: reading")
+            logging.getLogger("altfuse.progress").info("smoother: noise pass 1 of 3")
+        written = stream.getvalue()
+        if expected:
+            assert written == (
+                "\r\033[Kaltfuse: flight.bin: reading ..."
+                "\r\033[Kaltfuse: smoother: noise pass 1 of 3 ..."
+                "\r\033[K"
+            )
+        else:
+            assert written == ""
+    assert logging.getLogger("altfuse.progress").handlers == []

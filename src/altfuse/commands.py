@@ -3,13 +3,15 @@ each parses its options, calls the library and prints; nothing else prints."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import logging
+import shutil
 import sys
 import time
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, Literal, get_args
 
@@ -285,7 +287,8 @@ def fuse(
     opts = FuseOptions(method=method, params=params, **options)
     outputs = Outputs(output, meta_path, weights_path, plot_path)
     outputs.refuse(log, force)
-    done = fuse_to_files(log, outputs, opts)
+    with _progress_line():
+        done = fuse_to_files(log, outputs, opts)
     run = done.run
     for note in run.log.notes:
         logging.getLogger("altfuse").info("%s", note)
@@ -306,6 +309,42 @@ def fuse(
         + ", ".join(f"{k} {v}" for k, v in counts.items())
         + f" (provenance: {done.written['meta']})"
     )
+
+
+class _ProgressLine(logging.Handler):
+    """The run's latest step on one line of stderr, overwritten by the next and cleared at the
+    end (``altfuse.progress`` messages)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        text = f"altfuse: {record.getMessage()} ..."[: shutil.get_terminal_size().columns - 1]
+        sys.stderr.write(f"\r\033[K{text}")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        sys.stderr.write("\r\033[K")
+        sys.stderr.flush()
+        super().close()
+
+
+@contextlib.contextmanager
+def _progress_line() -> Iterator[None]:
+    """A progress line while a run lasts, where stderr is a terminal and neither -v (its steps
+    are lines then) nor -q asks otherwise; nothing when stderr is piped."""
+    shown = logging.getLogger("altfuse").getEffectiveLevel() == logging.WARNING
+    if not (shown and sys.stderr.isatty()):
+        yield
+        return
+    logger, handler = logging.getLogger("altfuse.progress"), _ProgressLine()
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(logging.NOTSET)
+        logger.propagate = True
+        handler.close()
 
 
 def _stats_line(name: str, kind: str, s: ErrorStats) -> str:
@@ -363,7 +402,8 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
     refuse_existing(force, json_path, csv_path, plot_path)
     chosen = [m.strip() for m in (methods or ",".join(METHODS)).split(",") if m.strip()]
     params = params_by_method(_method_values(options), chosen)
-    result = evaluate_log(log, chosen, FuseOptions(params=params, **options), truth, segments)
+    with _progress_line():
+        result = evaluate_log(log, chosen, FuseOptions(params=params, **options), truth, segments)
     t = result.prepared.referred.t
     click.echo(
         f"{log.name}: measured against {result.truth.label}, {t.size} ticks "

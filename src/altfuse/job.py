@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 from altfuse.evaluation import Evaluation, evaluate_prepared, truth_or_none
 from altfuse.fuse import DEFAULT_METHOD, params_for
 from altfuse.params import fields
-from altfuse.pipeline import FuseOptions, FuseRun, fuse_log, prepare_log, run_method
+from altfuse.pipeline import FuseOptions, FuseRun, fuse_log, prepare_log, progress, run_method
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.write import (
     Writer,
@@ -98,6 +98,7 @@ def fuse_to_files(
         fig = run_figure(run, {options.method: run.result.fused}, truth, title)
         extra[outputs.plot] = (writer(fig, outputs.plot), True)
     started = time.perf_counter()
+    progress.info("writing %s", outputs.csv.name)
     written = write_outputs(run, outputs.csv, outputs.weights, outputs.meta, extra)
     log.info("wrote the outputs in %.2f s", time.perf_counter() - started)
     return FileRun(run, evaluation, written)

@@ -24,6 +24,8 @@ from altfuse.params import Params, param, validate
 from altfuse.screen import rangefinder_param, screen
 
 log = logging.getLogger(__name__)
+#: What a run is doing now, for a progress line (``altfuse fuse`` on a terminal) or ``-v``.
+progress = logging.getLogger("altfuse.progress")
 
 
 @dataclass(frozen=True)
@@ -131,6 +133,7 @@ def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     dropped = dict(flight.dropped_sources)
     _require_sensors(name, tuple(s.name for s in flight.sensors), options, dropped)
     started = time.perf_counter()
+    progress.info("%s: aligning %d sources", name, len(flight.sensors))
     sensors = [tilt_correct(s, flight.attitude) for s in flight.sensors]
     sensors = [s for s in sensors if s.t.size]
     lags = gps_lags(sensors) if options.referral == "full" else {}
@@ -227,6 +230,7 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
     chosen = method(options.method)
     inputs = fusion_input(prepared, chosen, options.method)
     started = time.perf_counter()
+    progress.info("%s: fusing with %s", Path(flight.path).name, options.method)
     guarded = guard(chosen(inputs, options.params_of()), inputs)
     result = guarded.result
     log.info(
@@ -257,6 +261,7 @@ def run_method(prepared: Prepared, options: FuseOptions) -> FuseRun:
 def prepare_log(path: str | Path, options: FuseOptions) -> Prepared:
     """Read the log at ``path`` and :func:`prepare` it."""
     started = time.perf_counter()
+    progress.info("%s: reading", Path(path).name)
     flight = read_log(path)
     log.info(
         "%s: read %d bytes in %.2f s",

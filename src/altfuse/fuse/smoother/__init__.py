@@ -121,6 +121,7 @@ number of events: 10 us an event on a 1-hour flight with its 400 Hz IMU
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -144,6 +145,8 @@ from altfuse.fuse.smoother.noise import (
 from altfuse.fuse.smoother.passes import run
 from altfuse.model import FloatArray, Samples
 from altfuse.params import InvalidParameter, Params, param
+
+progress = logging.getLogger("altfuse.progress")  # as altfuse.pipeline.progress
 
 #: EM iterations (each a forward and a backward pass) after the first pass.
 EM_PASSES = 3
@@ -227,7 +230,8 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     # the thermal test's pass of the layout chosen, where it was made with these noises
     layout, drift_gain = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
     out = run(ev, noise.r(who), layout)
-    for _ in range(EM_PASSES):
+    for k in range(EM_PASSES):
+        progress.info("smoother: noise pass %d of %d (%d events)", k + 1, EM_PASSES, times.size)
         em_scale(ev, layout, noise, out)
         del out  # its covariances (190 MB a pass on a 300 MB log) go before the next pass's
         out = run(ev, noise.r(who), layout)
