@@ -121,7 +121,11 @@ class _Records:
             self.formats[f.name] = f
             if f.problem is not None and f.name in WANTED_TYPES and self.n(f.name):
                 self.problems[f.name] = f.problem
-        self._tables: dict[str, npt.NDArray[Any]] = {}
+        # the wanted types in one pass (Index.records_of); another type is gathered when asked
+        wanted = {self.formats[n].type_id: n for n in WANTED_TYPES if self.has(n)}
+        self._tables: dict[str, npt.NDArray[Any]] = {
+            wanted[t]: rows for t, rows in index.records_of(list(wanted)).items()
+        }
         self._raw: dict[tuple[str, str], FloatArray] = {}
         self.fmtu: dict[int, tuple[str, str]] = {}
         self.unit_lookup: dict[str, str] = {}

@@ -36,6 +36,7 @@ import ctypes
 import mmap
 import os
 import signal
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -112,6 +113,7 @@ class Index:
     types: npt.NDArray[np.uint8]
     formats: dict[int, Format]
     size: int
+    mapped: mmap.mmap | None = field(default=None, repr=False)  # the mapping ``data`` views
 
     @property
     def decoded_bytes(self) -> int:
@@ -126,10 +128,29 @@ class Index:
 
     def records(self, type_id: int) -> npt.NDArray[Any]:
         """All records of ``type_id`` as a structured array (a copy), in file order."""
+        return self.records_of([type_id])[type_id]
+
+    def records_of(self, type_ids: Sequence[int]) -> dict[int, npt.NDArray[Any]]:
+        """All records of each of ``type_ids`` (:meth:`records`), gathered in one pass over the
+        file, a chunk at a time, each chunk's pages released once gathered: the records of
+        every type lie all over the file, and a gather per type kept all its pages resident
+        (the whole file: 381 MB of a 300 MB log after its GPS alone)."""
+        at, out = {}, {}
+        for type_id in type_ids:
+            at[type_id] = self.offsets[self.types == type_id].astype(np.int64) + HEADER
+            out[type_id] = np.zeros(at[type_id].size, dtype=self.formats[type_id].dtype)
+        for start in range(0, self.size, 4 * _CHUNK):
+            stop = start + 4 * _CHUNK
+            for type_id, offsets in at.items():
+                a, b = np.searchsorted(offsets, [start, stop])
+                if b > a:
+                    out[type_id][a:b] = self._gather(type_id, offsets[a:b])
+            _release(self.mapped, start, stop)
+        return out
+
+    def _gather(self, type_id: int, offsets: npt.NDArray[np.int64]) -> npt.NDArray[Any]:
+        """The records of ``type_id`` at the payload ``offsets``."""
         fmt = self.formats[type_id]
-        offsets = self.offsets[self.types == type_id].astype(np.int64) + HEADER
-        if offsets.size == 0:
-            return np.zeros(0, dtype=fmt.dtype)
         width = fmt.dtype.itemsize
         # every byte offset as the start of a row of ``width`` bytes (a view, no copy); gathering
         # plain bytes is ~3x faster than gathering unaligned structured items
@@ -348,4 +369,4 @@ def index_file(path: str | Path) -> Index:
         if chained == (formats, first):
             break
         formats, first = chained
-    return Index(data, offsets, types, formats, size)
+    return Index(data, offsets, types, formats, size, mapped)
