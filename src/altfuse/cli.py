@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import importlib
 import logging
+import os
 import signal
 import sys
 import traceback
@@ -67,11 +68,17 @@ def _log_warning(
 
 
 def _fail_signalled(exc: BaseException | None) -> None:
-    """Exit as a signal asks (SIGTERM: 143, SIGINT: 130) when ``exc`` is one."""
-    if isinstance(exc, Terminated):
-        _fail("terminated", EXIT_TERMINATED)
-    if exc is not None:
-        _fail("interrupted", 128 + signal.SIGINT)
+    """Exit as a signal asks (SIGTERM: 143, SIGINT: 130) when ``exc`` is one, at once: the
+    temporary files are gone (removed on the way here), and the interpreter's shutdown would
+    run the destructors of what the signal cut short (llvmlite's, in a compilation: "Exception
+    ignored in ObjectRef.__del__", a second stderr line)."""
+    if exc is None:
+        return
+    terminated = isinstance(exc, Terminated)
+    click.echo(f"altfuse: error: {'terminated' if terminated else 'interrupted'}", err=True)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(EXIT_TERMINATED if terminated else 128 + signal.SIGINT)
 
 
 class _Cli(click.Group):
