@@ -48,7 +48,7 @@ from altfuse.errors import (
 from altfuse.io import sha256_of
 from altfuse.job import FileRun, Outputs, fuse_to_files
 from altfuse.params import InvalidParameter
-from altfuse.pipeline import FuseOptions, FuseRun
+from altfuse.pipeline import FuseOptions
 from altfuse.signals import EXIT_TERMINATED, Terminated, interruption
 from altfuse.write import (
     TableFormat,
@@ -136,8 +136,9 @@ class LogResult:
     metrics: dict[str, float | None] = field(default_factory=dict)
 
 
-def _described(name: str, run: FuseRun, seconds: float, done: FileRun) -> LogResult:
+def _described(name: str, done: FileRun, seconds: float) -> LogResult:
     """The summary row of a run written to files."""
+    run = done.run
     record = run.provenance
     counts, clock, guarded = record["status_counts"], record["clock"], record["guard"]
     ticks = max(int(run.referred.t.size), 1)
@@ -256,7 +257,7 @@ def process(job: Job, options: BatchOptions) -> LogResult:
         return LogResult(name, "failed", message, processing_s=time.perf_counter() - started)
     try:
         done = fuse_to_files(job.log, outputs, options.fuse, label=str(job.relative))
-        return _described(name, done.run, time.perf_counter() - started, done)
+        return _described(name, done, time.perf_counter() - started)
     except REFUSALS as exc:
         return LogResult(name, "refused", str(exc), processing_s=time.perf_counter() - started)
     except AltfuseError as exc:
@@ -496,14 +497,17 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
             if on_result is not None:
                 on_result(result, len(todo))
         write_summary(results, summary, previous)
-        index = out / summary_name(shard).replace("summary", "index").replace(".csv", ".json")
-        write_index(results, todo, options, index)
+        write_index(results, todo, options, out / summary_name(shard, "index.json"))
     return results
 
 
-def summary_name(shard: tuple[int, int] | None = None) -> str:
-    """``summary.csv``, or a shard's ``summary.shard-I-of-N.csv``."""
-    return SUMMARY if shard is None else f"summary.shard-{shard[0]}-of-{shard[1]}.csv"
+def summary_name(shard: tuple[int, int] | None = None, name: str = SUMMARY) -> str:
+    """A batch's own file ``name`` (``summary.csv``, ``index.json``), or a shard's
+    (``summary.shard-I-of-N.csv``)."""
+    if shard is None:
+        return name
+    stem, dot, suffix = name.partition(".")
+    return f"{stem}.shard-{shard[0]}-of-{shard[1]}{dot}{suffix}"
 
 
 def write_index(

@@ -64,6 +64,7 @@ _OTHER_TYPES = (
     "VIBE",
 )  # fmt: skip
 WANTED_TYPES = frozenset(_SENSOR_TYPES + _OTHER_TYPES)
+_UNIT_TYPES = frozenset({"UNIT", "MULT"})  # read with FMTU for the fields' units
 
 #: Format characters of text, and of text and arrays: never a number.
 _TEXT_CHARS = frozenset("nNZ")
@@ -121,8 +122,9 @@ class _Records:
             self.formats[f.name] = f
             if f.problem is not None and f.name in WANTED_TYPES and self.n(f.name):
                 self.problems[f.name] = f.problem
-        # the wanted types in one pass (Index.records_of); another type is gathered when asked
-        wanted = {self.formats[n].type_id: n for n in WANTED_TYPES if self.has(n)}
+        # the wanted types and the unit tables in one pass (Index.records_of); another type is
+        # gathered when asked
+        wanted = {self.formats[n].type_id: n for n in WANTED_TYPES | _UNIT_TYPES if self.has(n)}
         self._tables: dict[str, npt.NDArray[Any]] = {
             wanted[t]: rows for t, rows in index.records_of(list(wanted)).items()
         }
