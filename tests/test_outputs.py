@@ -359,3 +359,22 @@ def test_a_worker_that_dies_fails_its_log_alone(tmp_path: Path) -> None:
     assert "its worker process died" in by_log["b.bin"].error
     assert {r.status for name, r in by_log.items() if name != "b.bin"} == {"ok"}
     assert pd.read_csv(tmp_path / "out" / "summary.csv")["log"].tolist() == sorted(by_log)
+
+
+def dying_at_start(job: batch_module.Job, options: BatchOptions) -> batch_module.LogResult:
+    """A worker's job that ends its process on ``b.bin`` before it says it started."""
+    if job.log.name == "b.bin":
+        time.sleep(1.0)
+        os._exit(1)
+    return _PROCESS_IN_WORKER(job, options)
+
+
+def test_a_log_whose_worker_dies_before_it_starts_still_has_a_row(tmp_path: Path) -> None:
+    """Run alone after the pool broke, a job lost before its worker said it started was
+    dropped without a row."""
+    logs = copies(tmp_path / "logs", "a.bin", "b.bin", "c.bin")
+    with pytest.MonkeyPatch.context() as monkey:
+        monkey.setattr(batch_module, "_process_in_worker", dying_at_start)
+        results = run_batch([logs], tmp_path / "out", jobs=2)
+    by_log = {r.log: r.status for r in results}
+    assert by_log == {"a.bin": "ok", "b.bin": "failed", "c.bin": "ok"}

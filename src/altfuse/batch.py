@@ -332,8 +332,8 @@ def _local(jobs: list[Job], options: BatchOptions, workers: int) -> Iterator[Log
             running, waiting = waiting, []
         pending = waiting
         for job in running:
-            suspect, _ = yield from _pool([job], options, 1)
-            for lost in suspect:
+            began, before = yield from _pool([job], options, 1)
+            for lost in began + before:  # alone: whichever, its worker died with it
                 why = "not finished: its worker process died (a log that shrank while read?)"
                 yield LogResult(printable(str(lost.relative)), "failed", why)
 
