@@ -14,7 +14,7 @@ import pytest
 
 from altfuse.batch import BatchOptions, run_batch
 from altfuse.write import CSV_DECIMALS, column_unit
-from conftest import SAMPLE_LOG
+from conftest import SAMPLE_LOG, shared_log
 from test_cli import run
 
 
@@ -101,7 +101,9 @@ def test_the_csv_float_format_is_documented_and_byte_stable(tmp_path: Path) -> N
         ("variance_gps", "m^2"),
         ("weight_rangefinder", "1"),
         ("support_gps", "1"),
-        ("status", ""),
+        ("support_rmse", "m"),
+        ("baro_max", "m"),
+        ("smoother_diverged", "1"),
     ],
 )
 def test_column_units(name: str, unit: str) -> None:
@@ -114,10 +116,33 @@ def test_a_batch_writes_parquet_and_resumes_on_it(tmp_path: Path) -> None:
     assert [r.status for r in first] == ["ok"]
     written = sorted(p.name for p in (tmp_path / "out").iterdir())
     assert written == ["index.json", "mission.meta.json", "mission.parquet",
-                       "mission.weights.parquet", "summary.csv"]  # fmt: skip
+                       "mission.weights.parquet", "summary.csv", "summary.parquet"]  # fmt: skip
     again = run_batch([SAMPLE_LOG], tmp_path / "out", BatchOptions(format="parquet", weights=True,
                                                                   skip_existing=True))  # fmt: skip
     assert [r.status for r in again] == ["skipped"]
     result = run("batch", SAMPLE_LOG, "-o", tmp_path / "cli", "--format", "xlsx")
     assert result.exit_code == 2
     assert "'xlsx' is not one of 'csv', 'parquet'" in result.output
+
+
+def test_a_parquet_batch_writes_its_summary_as_parquet_too(tmp_path: Path) -> None:
+    """summary.parquet holds summary.csv's rows and columns (a refused log's too), with units on
+    the numbers (the flight's span in s, the metrics in m) and the altfuse version."""
+    refused = shared_log("ardupilot") / "pfcFlightData_center_0003.bin"
+    options = BatchOptions(format="parquet", evaluate=True)
+    results = run_batch([SAMPLE_LOG, refused], tmp_path / "out", options, jobs=1)
+    assert sorted(r.status for r in results) == ["ok", "refused"]
+    csv = pd.read_csv(tmp_path / "out" / "summary.csv", keep_default_na=False)
+    table = pq.read_table(tmp_path / "out" / "summary.parquet")
+    parquet = table.to_pandas()
+    assert list(parquet.columns) == list(csv.columns)
+    assert list(parquet.log) == list(csv.log) == ["mission.bin", refused.name]
+    assert list(parquet.status) == ["ok", "refused"]
+    assert parquet.error[1] == csv.error[1] != ""
+    assert parquet.smoother_rmse[0] == pytest.approx(float(csv.smoother_rmse[0]), abs=1e-6)
+    units = {f.name: (f.metadata or {}).get(b"unit", b"?").decode() for f in table.schema}
+    assert units["flight_s"] == units["processing_s"] == "s"
+    assert units["smoother_rmse"] == units["max_excursion_m"] == "m"
+    assert units["samples"] == units["fused_share"] == "1"
+    assert units["log"] == units["status"] == ""
+    assert json.loads(table.schema.metadata[b"altfuse"])["altfuse_version"]

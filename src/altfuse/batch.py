@@ -2,7 +2,8 @@
 
 :func:`run_batch` finds the logs under the given folders and files, fuses each with the same
 options (optionally evaluating it and drawing its figure), writes each log's outputs under the
-output folder mirroring the input tree, and a ``summary.csv``. One bad log never stops the batch:
+output folder mirroring the input tree, and a ``summary.csv`` (and ``summary.parquet`` with
+Parquet tables). One bad log never stops the batch:
 its row says why it failed. Logs run in local processes (``jobs``) or on a Dask cluster
 (``scheduler``); every log's outputs are the same bytes either way.
 
@@ -55,9 +56,12 @@ from altfuse.write import (
     atomic_outputs,
     remove_stale_temporaries,
     write_json,
+    write_table,
 )
 
 SUMMARY = "summary.csv"
+#: The summary as Parquet too, with ``--format parquet``.
+PARQUET_SUMMARY = "summary.parquet"
 _PR_SET_PDEATHSIG = 1
 #: Exit code of a batch in which some logs failed (0: all ok; 1/2: the batch itself could not run).
 EXIT_PARTIAL = 4
@@ -408,11 +412,16 @@ def _previous_summary(path: Path) -> pd.DataFrame | None:
 
 
 def write_summary(
-    results: Iterable[LogResult], path: Path, previous: pd.DataFrame | None = None
+    results: Iterable[LogResult],
+    path: Path,
+    previous: pd.DataFrame | None = None,
+    parquet: Path | None = None,
 ) -> None:
     """``summary.csv``: one row per log, sorted by log, metrics as columns. With ``previous``
     (an earlier summary) its rows of logs not run now are kept, and a log skipped now keeps its
-    earlier row, status ``skipped``."""
+    earlier row, status ``skipped``. With ``parquet``, the same table there too (each column's
+    unit in its metadata, the altfuse version in the file's), written with the CSV, both or
+    neither."""
     rows = []
     for r in results:
         row: dict[str, Any] = {
@@ -435,6 +444,9 @@ def write_summary(
     table = table.sort_values("log", kind="stable")
     with atomic_outputs() as stage:
         stage(path, lambda f: table.to_csv(f, index=False, float_format="%.6f"))
+        if parquet is not None:
+            record = {"altfuse_version": __version__}
+            stage(parquet, write_table(table, "parquet", record), binary=True)
 
 
 @contextlib.contextmanager
@@ -496,7 +508,10 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
             results.append(result)
             if on_result is not None:
                 on_result(result, len(todo))
-        write_summary(results, summary, previous)
+        parquet = (
+            out / summary_name(shard, PARQUET_SUMMARY) if options.format == "parquet" else None
+        )
+        write_summary(results, summary, previous, parquet)
         write_index(results, todo, options, out / summary_name(shard, "index.json"))
     return results
 

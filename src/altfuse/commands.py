@@ -502,7 +502,8 @@ class _Progress:
     type=click.Choice(["csv", "parquet"]),
     default="csv",
     show_default=True,
-    help="Format of each log's fused table (and weight traces).",
+    help="Format of each log's fused table (and weight traces); parquet writes "
+    "summary.parquet beside summary.csv too.",
 )
 @click.option("--weights", is_flag=True, help="Also write each log's weight traces.")
 @click.option(

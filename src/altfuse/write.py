@@ -40,18 +40,20 @@ def table_format(path: Path) -> TableFormat:
     return "parquet" if path.suffix.lower() == ".parquet" else "csv"
 
 
-_UNITS = {"status": "", "velocity": "m/s", "accel_bias": "m/s^2", "accel_up": "m/s^2",
-          "correction": "m"}  # fmt: skip
+_UNITS = {"velocity": "m/s", "accel_bias": "m/s^2", "accel_up": "m/s^2", "correction": "m"}
 
 
 def column_unit(name: str) -> str:
-    """A fused or weights table column's unit (Parquet column metadata): ``m``, ``s``,
-    ``m/s``, ``m/s^2``, ``1`` (a share or a count), or ``""`` (text)."""
+    """A numeric column's unit (Parquet column metadata) in a fused, weights or summary table:
+    ``m``, ``s``, ``m/s``, ``m/s^2``, ``m^2`` or ``1`` (a share or a count). Text and flags
+    have none (:func:`write_table`)."""
     if name in _UNITS:
         return _UNITS[name]
     if name.endswith("_s"):
         return "s"
-    if name.endswith(("_m", "_std")) or name.startswith(("offset_", "temporal_estimate_")):
+    if name.endswith(("_m", "_std", "_rmse", "_max")) or name.startswith(
+        ("offset_", "temporal_estimate_")
+    ):
         return "m"
     if "variance" in name:
         return "m^2"
@@ -70,7 +72,10 @@ def write_table(table: pd.DataFrame, fmt: TableFormat, metadata: dict[str, Any])
             import pyarrow.parquet as pq
 
             arrow = pa.Table.from_pandas(table, preserve_index=False)
-            fields = [f.with_metadata({"unit": column_unit(f.name)}) for f in arrow.schema]
+            fields = [
+                f.with_metadata({"unit": column_unit(f.name) if _numeric(f.type) else ""})
+                for f in arrow.schema
+            ]
             schema = pa.schema(fields, metadata={"altfuse": json.dumps(metadata, default=str)})
             pq.write_table(arrow.cast(schema), handle)
             return
@@ -87,6 +92,13 @@ def write_table(table: pd.DataFrame, fmt: TableFormat, metadata: dict[str, Any])
         pacsv.write_csv(arrow, handle, options)
 
     return write
+
+
+def _numeric(kind: Any) -> bool:
+    """Whether an Arrow type is a number (a unit applies), not text or a flag."""
+    import pyarrow as pa
+
+    return bool(pa.types.is_integer(kind) or pa.types.is_floating(kind))
 
 
 def fused_table(run: FuseRun) -> pd.DataFrame:
