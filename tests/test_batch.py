@@ -5,20 +5,23 @@ from __future__ import annotations
 import fcntl
 import filecmp
 import json
+import multiprocessing
 import os
 import shutil
 import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pandas as pd
 import pytest
 from click.testing import CliRunner
+from threadpoolctl import threadpool_info
 
 from altfuse import __version__
-from altfuse.batch import EXIT_PARTIAL, BatchOptions, find_logs, run_batch
+from altfuse.batch import EXIT_PARTIAL, BatchOptions, _worker_start, find_logs, run_batch
 from altfuse.cli import cli
 from altfuse.errors import LogReadError, ParameterError
 from altfuse.evaluation import evaluate
@@ -345,3 +348,17 @@ def test_the_index_says_what_made_each_log_s_outputs(tmp_path: Path) -> None:
     run_batch([logs], out, jobs=1, shard=(2, 2))
     shard = json.loads((out / "index.shard-2-of-2.json").read_text())
     assert list(shard["logs"]) == ["b.bin"]
+
+
+def test_a_batch_worker_computes_on_one_thread() -> None:
+    """The workers fork from a process that loaded numpy (a Python caller's): each holds its
+    BLAS pool to one thread, or the pools spin beside the other workers (8 logs of 30 MB on 2
+    cores: as long at two jobs as at one)."""
+    context = multiprocessing.get_context()
+    started = context.SimpleQueue()
+    with ProcessPoolExecutor(
+        1, mp_context=context, initializer=_worker_start, initargs=(os.getpid(), started)
+    ) as pool:
+        pools = pool.submit(threadpool_info).result()
+    assert pools
+    assert {p["num_threads"] for p in pools} == {1}

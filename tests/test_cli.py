@@ -6,6 +6,7 @@ import hashlib
 import io
 import json
 import logging
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -312,3 +313,32 @@ def test_a_progress_line_on_a_terminal_only(monkeypatch: pytest.MonkeyPatch) -> 
         else:
             assert written == ""
     assert logging.getLogger("altfuse.progress").handlers == []
+
+
+POOLS = """
+import sys
+from altfuse import cli
+sys.argv = ["altfuse", "--version"]
+try:
+    cli.main()
+except SystemExit:
+    pass
+import numpy
+from threadpoolctl import threadpool_info
+print(max(pool["num_threads"] for pool in threadpool_info()))
+"""
+
+
+@pytest.mark.parametrize(("given", "threads"), [(None, "1"), ("2", "2")])
+def test_the_command_holds_numpy_s_thread_pools_to_one_thread(
+    given: str | None, threads: str
+) -> None:
+    """A BLAS pool's threads only spin beside altfuse's work (and beside a batch's other
+    workers); a user's own setting stands."""
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    done = subprocess.run(
+        [sys.executable, "-c", POOLS], env=env, capture_output=True, text=True, check=True
+    )
+    assert done.stdout.split()[-1] == threads

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any, Literal, get_args
 
 import pandas as pd
+from threadpoolctl import threadpool_limits
 
 from altfuse import __version__
 from altfuse.errors import (
@@ -297,8 +298,10 @@ def _worker_start(parent: int, started: Any) -> None:
     """In each worker process: SIGTERM ends it, removing the temporary files of the log in
     hand, and on Linux the worker is sent SIGTERM when its parent dies (``PR_SET_PDEATHSIG``),
     so that a killed batch does not leave workers writing on. ``started`` is the queue on
-    which it says which job it starts."""
+    which it says which job it starts. Each worker computes on one thread (a BLAS pool forked
+    from a parent that loaded numpy would spin beside the other workers: see ``altfuse.cli``)."""
     _worker.started = started
+    threadpool_limits(1)
     signal.signal(signal.SIGTERM, _worker_signal)
     if sys.platform.startswith("linux"):
         with contextlib.suppress(OSError, AttributeError):
