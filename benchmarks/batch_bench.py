@@ -14,6 +14,7 @@ alternate, and each figure is the median of ``--repeat``.
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import statistics
 import sys
@@ -21,7 +22,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from altfuse.batch import run_batch
+from altfuse.cli import THREAD_POOLS
+
+for _pool in THREAD_POOLS:  # as the command does, before numpy is loaded: --jobs 1 runs here
+    os.environ.setdefault(_pool, "1")
+
+from altfuse.batch import run_batch  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
