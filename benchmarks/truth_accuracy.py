@@ -1,5 +1,6 @@
 """Each sensor's and each method's error against the simulator's truth on the logs in
-``../shared/logs/truth`` (issue 14, acceptance 2).
+``../shared/logs/truth`` (issue 14, acceptance 2) and the PX4 simulator logs in
+``../shared/logs/px4`` whose groundtruth passes altfuse's check (issue 18).
 
 Run on demand:  python benchmarks/truth_accuracy.py [--shared ../shared/logs] [--jobs 2]
 
@@ -8,7 +9,8 @@ Per log: each sensor's RMSE and maximum error [m] against ``SIM.Alt`` (referred 
 scale and lag (``referral="full"``, the default), then every method's RMSE with the default
 options, the best single sensor's and the onboard EKF's; then per method its RMSE, maximum
 error, +-2 sigma coverage and whether it passes the project's bar (``tests/accuracy.py``'s
-``verdict``: the checks it fails). A log that cannot be fused prints why.
+``verdict``: the checks it fails). A log that cannot be fused, or whose truth is refused (a PX4
+groundtruth moving against the sensors; a ULog without one), prints why.
 """
 
 from __future__ import annotations
@@ -33,8 +35,8 @@ def measure(path: Path) -> str:
     """The rows of one log, as text."""
     lines = [f"== {path.name}"]
     try:
-        offset = evaluate(path, ["mean"], FuseOptions(referral="offset"))
-        full = evaluate(path, list(METHODS), FuseOptions())
+        offset = evaluate(path, ["mean"], FuseOptions(referral="offset"), truth="sim")
+        full = evaluate(path, list(METHODS), FuseOptions(), truth="sim")
     except AltfuseError as exc:
         return "\n".join([*lines, f"   refused: {exc}"])
     before = {r.name: r.overall for r in offset.rows if r.kind == "sensor"}
@@ -73,7 +75,9 @@ def main() -> None:
     parser.add_argument("--shared", type=Path, default=ROOT.parent / "shared" / "logs")
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args()
-    logs = sorted((args.shared / "truth").glob("*.BIN"))
+    logs = sorted((args.shared / "truth").glob("*.BIN")) + sorted(
+        (args.shared / "px4").glob("*.ulg")
+    )
     print("errors [m] against SIM.Alt: RMSE, maximum")
     with ProcessPoolExecutor(args.jobs) as pool:
         for text in pool.map(measure, logs):

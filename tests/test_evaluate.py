@@ -98,7 +98,7 @@ def test_real_log_uses_the_ekf_as_a_reference_and_says_so(tmp_path: Path) -> Non
 def test_asking_for_a_reference_the_log_lacks_fails_in_one_line() -> None:
     result = CliRunner().invoke(cli, ["evaluate", str(PAPER_A), "--truth", "ekf"])
     assert result.exit_code == 1
-    assert "no XKF1/NKF1 or CTUN.Alt records" in result.stderr
+    assert "no EKF estimate (XKF1/NKF1, CTUN.Alt" in result.stderr
 
 
 def test_method_parameters_pass_through_evaluate(tmp_path: Path) -> None:

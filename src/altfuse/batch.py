@@ -61,6 +61,8 @@ from altfuse.write import (
 )
 
 SUMMARY = "summary.csv"
+#: The logs a batch takes by default: DataFlash and ULog, whatever their case.
+LOG_PATTERNS = ("*.bin", "*.ulg")
 #: The summary as Parquet too, with ``--format parquet``.
 PARQUET_SUMMARY = "summary.parquet"
 _PR_SET_PDEATHSIG = 1
@@ -179,9 +181,13 @@ def _described(name: str, done: FileRun, seconds: float) -> LogResult:
     )
 
 
-def find_logs(paths: Sequence[str | Path], pattern: str = "*.bin") -> list[tuple[Path, Path]]:
-    """(log, path relative to its input folder) for every file matching ``pattern``, without
-    regard to case, under ``paths`` (folders searched recursively; files taken as given)."""
+def find_logs(
+    paths: Sequence[str | Path], pattern: str | Sequence[str] = LOG_PATTERNS
+) -> list[tuple[Path, Path]]:
+    """(log, path relative to its input folder) for every file matching ``pattern`` (or any of
+    several), without regard to case, under ``paths`` (folders searched recursively; files
+    taken as given)."""
+    patterns = [p.lower() for p in _patterns(pattern)]
     found: dict[Path, Path] = {}
     seen: set[Path] = set()
     for raw in paths:
@@ -194,7 +200,7 @@ def find_logs(paths: Sequence[str | Path], pattern: str = "*.bin") -> list[tuple
                 for p in sorted(root.rglob("*"))
                 if p.is_file()
                 and not p.name.startswith(".")
-                and fnmatch.fnmatch(p.name.lower(), pattern.lower())
+                and any(fnmatch.fnmatch(p.name.lower(), each) for each in patterns)
             )
         else:
             raise LogReadError(f"{root}: no such file or folder")
@@ -211,7 +217,13 @@ def find_logs(paths: Sequence[str | Path], pattern: str = "*.bin") -> list[tuple
     return [(log, relative) for relative, log in sorted(found.items())]
 
 
-def plan(paths: Sequence[str | Path], out_dir: str | Path, pattern: str = "*.bin") -> list[Job]:
+def _patterns(pattern: str | Sequence[str]) -> tuple[str, ...]:
+    return (pattern,) if isinstance(pattern, str) else tuple(pattern)
+
+
+def plan(
+    paths: Sequence[str | Path], out_dir: str | Path, pattern: str | Sequence[str] = LOG_PATTERNS
+) -> list[Job]:
     """The jobs of a batch: each log with its output stem under ``out_dir``. Two logs whose
     stems differ only in case or extension (``flight.bin``, ``flight.BIN``) would write one set
     of outputs (on a case-insensitive file system, or by suffix): refused, naming both."""
@@ -476,7 +488,7 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
     out_dir: str | Path,
     options: BatchOptions | None = None,
     *,
-    pattern: str = "*.bin",
+    pattern: str | Sequence[str] = LOG_PATTERNS,
     jobs: int | None = None,
     scheduler: str | None = None,
     on_result: Callable[[LogResult, int], None] | None = None,
@@ -497,7 +509,8 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
         raise InvalidParameter("shard", f"must be I/N with 1 <= I <= N, got {shard[0]}/{shard[1]}")
     todo = plan(paths, out_dir, pattern)
     if not todo:
-        raise LogReadError(f"no file matching {pattern!r} under {', '.join(map(str, paths))}")
+        wanted = " or ".join(repr(p) for p in _patterns(pattern))
+        raise LogReadError(f"no file matching {wanted} under {', '.join(map(str, paths))}")
     if shard is not None:
         todo = todo[shard[0] - 1 :: shard[1]]
     out = Path(out_dir)

@@ -20,6 +20,7 @@ from click.core import ParameterSource
 
 from altfuse.batch import (
     EXIT_PARTIAL,
+    LOG_PATTERNS,
     BatchOptions,
     LogResult,
     Outcome,
@@ -472,9 +473,10 @@ class _Progress:
 )
 @click.option(
     "--pattern",
-    default="*.bin",
+    multiple=True,
+    default=LOG_PATTERNS,
     show_default=True,
-    help="File names to take, whatever their case (.bin and .BIN).",
+    help="File names to take, whatever their case (.bin and .BIN); repeat it for several.",
 )
 @click.option(
     "-j",
@@ -522,7 +524,7 @@ class _Progress:
 def batch(  # noqa: PLR0913 (one argument per option: click's way)
     paths: tuple[Path, ...],
     output: Path,
-    pattern: str,
+    pattern: tuple[str, ...],
     jobs: int | None,
     scheduler: str | None,
     skip_existing: bool,

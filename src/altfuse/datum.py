@@ -186,7 +186,7 @@ def tilt_correct(series: Series, attitude: Attitude | None) -> Series:
     if attitude is None or attitude.t.size < 2:
         return replace(series, datum=f"{series.datum} (not tilt-corrected: no attitude)")
     inside = (series.t >= attitude.t[0]) & (series.t <= attitude.t[-1])
-    roll, pitch = attitude.roll_pitch_at(series.t[inside])
+    tilt = attitude.down_at(series.t[inside])[:, 2]  # cos(roll) cos(pitch)
     dropped = dict(series.dropped)
     if (~inside).any():
         dropped["outside the attitude's time range"] = int((~inside).sum())
@@ -194,7 +194,7 @@ def tilt_correct(series: Series, attitude: Attitude | None) -> Series:
         series,
         datum=f"{series.datum} (tilt-corrected with {attitude.source})",
         t=series.t[inside],
-        value=series.value[inside] * np.cos(roll) * np.cos(pitch),
+        value=series.value[inside] * tilt,
         dropped=dropped,
     )
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -40,11 +41,12 @@ class Truth:
     is_reference: bool  # True: an estimate standing in for the truth
     source: str
     h: FloatArray
+    refused: str = ""  # why the simulator's truth was not used, where the log has one
 
     @property
     def label(self) -> str:
         what = "reference (the autopilot's estimate, not truth)" if self.is_reference else "truth"
-        return f"{self.source} as {what}"
+        return f"{self.source} as {what}" + (f"; {self.refused}" if self.refused else "")
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,7 @@ class Evaluation:
                 "source": self.truth.source,
                 "is_reference": self.truth.is_reference,
                 "label": self.truth.label,
+                "refused": self.truth.refused or None,
             },
             "segments": {k: list(v) for k, v in self.segments.items()},
             "rows": [
@@ -122,8 +125,43 @@ def _on_clock(series: Series, referred: Referred) -> FloatArray:
     return np.asarray(h - np.median(h[ground]))
 
 
+#: A simulator's truth is checked against the sensors where either moves: its heights must
+#: correlate with the sensors' median at least this much. Two PX4 simulator logs (v1.7.3,
+#: v1.8.0) have a groundtruth altitude that moves opposite to GPS and barometer (correlation
+#: -1.00): Gazebo's GPS plugin subtracted the height from the home altitude until
+#: PX4-SITL_gazebo-classic#260 (Dec 2018); every other truth log correlates at +1.000.
+TRUTH_MIN_CORRELATION = 0.5
+#: ... where the sensors' median or the truth moves by this much [m, standard deviation]; a
+#: vehicle that stays on the ground gives nothing to check (its truth is flat, its sensors noise).
+TRUTH_CHECK_MOTION_M = 0.2
+
+
+def truth_check(truth: FloatArray, referred: Referred) -> str:
+    """Why the simulator's heights ``truth`` (on the clock) cannot be the truth: its motion
+    does not follow the sensors' (their median over the ticks both have); "" when it does."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a tick no sensor has: NaN
+        consensus = np.nanmedian(referred.h, axis=1)
+    both = np.isfinite(truth) & np.isfinite(consensus)
+    if both.sum() < 3:
+        return "too few ticks beside the sensors to check it"
+    a, b = truth[both], consensus[both]
+    if max(float(np.std(a)), float(np.std(b))) < TRUTH_CHECK_MOTION_M:
+        return ""
+    with np.errstate(all="ignore"):  # one of them flat: NaN, refused
+        r = float(np.corrcoef(a, b)[0, 1])
+    if r >= TRUTH_MIN_CORRELATION:
+        return ""
+    why = f"its heights do not follow the sensors' (correlation {r:+.2f})"
+    if r <= -TRUTH_MIN_CORRELATION:
+        why += ": it moves opposite to them, a sign error (PX4's simulator groundtruth had one "
+        why += "until PX4-SITL_gazebo-classic#260, Dec 2018)"
+    return why
+
+
 def choose_truth(flight: FlightLog, referred: Referred, which: TruthChoice = "auto") -> Truth:
-    """The simulator's truth, else the EKF as a reference (``which``: auto, sim or ekf)."""
+    """The simulator's truth (checked: :func:`truth_check`), else the EKF as a reference
+    (``which``: auto, sim or ekf)."""
     if which not in TRUTHS:
         raise InvalidParameter("truth", f"must be one of {', '.join(TRUTHS)}, got {which!r}")
     refs = {r.name: r for r in flight.references}
@@ -131,14 +169,25 @@ def choose_truth(flight: FlightLog, referred: Referred, which: TruthChoice = "au
     candidates: tuple[tuple[str, Literal["sim", "ekf"]], ...] = (
         ("sim", "sim"), ("ekf", "ekf"), ("ctun", "ekf"),
     )  # fmt: skip
+    refused = ""
     for candidate, kind in candidates:
         if which in ("auto", kind) and candidate in refs:
             series = refs[candidate]
-            return Truth(kind, kind == "ekf", series.source, _on_clock(series, referred))
-    wanted = {"auto": "SIM, XKF1/NKF1 or CTUN.Alt", "sim": "SIM", "ekf": "XKF1/NKF1 or CTUN.Alt"}[
-        which
-    ]
-    raise NoUsableSensorsError(f"{name}: no {wanted} records to measure against")
+            h = _on_clock(series, referred)
+            if kind == "sim" and (why := truth_check(h, referred)):
+                refused = f"{series.source} refused as truth: {why}"
+                if which == "sim":
+                    raise NoUsableSensorsError(f"{name}: {refused}")
+                continue
+            return Truth(kind, kind == "ekf", series.source, h, refused)
+    wanted = {
+        "auto": "simulator truth or EKF estimate",
+        "sim": "simulator truth (SIM, or PX4's groundtruth topics)",
+        "ekf": "EKF estimate (XKF1/NKF1, CTUN.Alt, or PX4's vehicle_global/local_position)",
+    }[which]
+    raise NoUsableSensorsError(
+        f"{name}: no {wanted} to measure against" + (f"; {refused}" if refused else "")
+    )
 
 
 def truth_or_none(flight: FlightLog, referred: Referred) -> Truth | None:

@@ -5,7 +5,8 @@ the specific force ``f`` in the body frame (FRD, IMU.AccX/Y/Z) and the attitude 
 
     a_up = -(R_body_to_ned @ f)_z - g
 
-with ``R`` from ZYX Euler angles; only its last row matters,
+with ``R`` from ZYX Euler angles or the logged quaternion; only its last row matters
+(:meth:`~altfuse.model.Attitude.down_at`), from Euler angles
 ``(-sin(pitch), sin(roll) cos(pitch), cos(roll) cos(pitch))``. Level and at rest
 ``f = (0, 0, -g)`` and ``a_up = 0``. The IMU is logged faster than the fusion clock; its samples are
 averaged into each tick's cell (a box filter that also blunts single-sample spikes).
@@ -71,9 +72,7 @@ def vertical_acceleration(imu: Imu, attitude: Attitude) -> tuple[FloatArray, Flo
     inside = (imu.t >= attitude.t[0]) & (imu.t <= attitude.t[-1])
     t = imu.t[inside]
     f = imu.acc[inside]
-    roll, pitch = attitude.roll_pitch_at(t)
-    f_down = -np.sin(pitch) * f[:, 0] + np.sin(roll) * np.cos(pitch) * f[:, 1]
-    f_down += np.cos(roll) * np.cos(pitch) * f[:, 2]
+    f_down = np.einsum("ij,ij->i", attitude.down_at(t), f)
     return t, -f_down - G
 
 

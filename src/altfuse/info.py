@@ -39,8 +39,8 @@ def describe_series(s: Series) -> dict[str, Any]:
 
 
 def damage(flight: FlightLog) -> str | None:
-    """One line on what reading left out: bytes skipped, implausible samples dropped."""
-    parts = []
+    """One line on what reading left out: damage, bytes skipped, implausible samples dropped."""
+    parts = list(flight.damaged)
     if flight.skipped_bytes:
         parts.append(f"{flight.skipped_bytes} bytes skipped (not part of any decodable record)")
     implausible = implausible_count(flight)

@@ -71,9 +71,12 @@ class Series:
 
     @property
     def is_raw_rangefinder(self) -> bool:
-        """A rangefinder's own distance along the body's down axis (``RFND``, ``SONR``), not the
-        autopilot's tilt-corrected ``CTUN.SAlt``: its driver's limits and clearance apply."""
-        return self.kind == "rangefinder" and self.source.startswith(("RFND", "SONR"))
+        """A rangefinder's own distance along the body's down axis (``RFND``, ``SONR``, PX4's
+        ``distance_sensor``), not the autopilot's tilt-corrected ``CTUN.SAlt``: its driver's
+        limits and clearance apply."""
+        return self.kind == "rangefinder" and self.source.startswith(
+            ("RFND", "SONR", "distance_sensor")
+        )
 
 
 @dataclass(frozen=True)
@@ -99,20 +102,39 @@ class Vibration:
 
 @dataclass(frozen=True)
 class Attitude:
-    """Vehicle attitude [rad], ZYX Euler angles as ArduPilot logs them in ATT."""
+    """Vehicle attitude [rad], ZYX Euler angles as ArduPilot logs them in ATT; where the log gives
+    the rotation as a quaternion (PX4's ``vehicle_attitude.q``: w, x, y, z, body FRD to NED),
+    that too, and the rotation comes from it (no Euler round trip)."""
 
     source: str
     t: FloatArray
     roll: FloatArray
     pitch: FloatArray
     yaw: FloatArray
+    quaternion: FloatArray | None = None  # shape (n, 4), unit
 
-    def roll_pitch_at(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Roll and pitch [rad] at times ``t``, interpolated on the unwrapped angles: a roll
-        from +179 deg to -179 deg turns 2 deg, not 358 deg back through level."""
-        roll = np.interp(t, self.t, np.unwrap(self.roll))
-        pitch = np.interp(t, self.t, np.unwrap(self.pitch))
-        return roll, pitch
+    def down_at(self, t: FloatArray) -> FloatArray:
+        """The last row of the body-to-NED rotation at times ``t`` (shape (n, 3)): a body
+        vector's component down is its dot product with it, and its last element,
+        ``cos(roll) cos(pitch)``, is the body's down axis against the vertical.
+
+        From Euler angles ``(-sin(pitch), sin(roll) cos(pitch), cos(roll) cos(pitch))``,
+        interpolated on the unwrapped angles (a roll from +179 deg to -179 deg turns 2 deg, not
+        358 deg back through level); from a quaternion ``(2(xz - wy), 2(yz + wx), 1 - 2(x^2 +
+        y^2))``, each component interpolated after the samples are put on one hemisphere
+        (``q`` and ``-q`` are one rotation) and renormalised."""
+        if self.quaternion is None:
+            roll = np.interp(t, self.t, np.unwrap(self.roll))
+            pitch = np.interp(t, self.t, np.unwrap(self.pitch))
+            return np.column_stack(
+                [-np.sin(pitch), np.sin(roll) * np.cos(pitch), np.cos(roll) * np.cos(pitch)]
+            )
+        q = self.quaternion.copy()
+        flips = np.cumsum(np.concatenate(([False], np.sum(q[1:] * q[:-1], axis=1) < 0)))
+        q[flips % 2 == 1] *= -1.0
+        q = np.column_stack([np.interp(t, self.t, q[:, i]) for i in range(4)])
+        w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+        return np.column_stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
 
 
 @dataclass(frozen=True)
@@ -143,3 +165,6 @@ class FlightLog:
     temperatures: dict[str, Series] = field(default_factory=dict)  # [degC] by sensor name
     # samples of the inputs beside the altitudes (IMU, ATT, ...) dropped by screening, by source
     dropped_inputs: dict[str, int] = field(default_factory=dict)
+    # damage the reader met but could not count in bytes (a ULog's corruption flag), one line each
+    damaged: tuple[str, ...] = ()
+    reader: str = "DataFlash (altfuse.io.fastdf, pymavlink's formats)"  # what read the file

@@ -101,7 +101,7 @@ def _require_sensors(
     why = "".join(f"; {k}: {v}" for k, v in dropped.items())
     if not names:
         raise NoUsableSensorsError(
-            f"{log_name}: no usable altitude source (looked for GPS, BARO, RFND, SONR, CTUN){why}"
+            f"{log_name}: no usable altitude source (looked for GPS, barometer, rangefinder){why}"
         )
     raise NoUsableSensorsError(
         f"{log_name}: {len(names)} usable altitude source ({', '.join(names)}) where min_sensors "
@@ -290,6 +290,7 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
             "size_bytes": flight.size_bytes,
             "vehicle": flight.vehicle,
             "firmware": flight.firmware,
+            "reader": flight.reader,
             "skipped_bytes": flight.skipped_bytes,
             "notes": list(flight.notes),
         },
@@ -302,7 +303,7 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
             "start_s": float(aligned.t[0]),
             "end_s": float(aligned.t[-1]),
             "ticks": int(aligned.t.size),
-            "time": "seconds since the autopilot booted (TimeUS / 1e6)",
+            "time": "seconds since the autopilot booted (DataFlash TimeUS, ULog timestamp: / 1e6)",
         },
         "datum": {
             "meaning": "height above the take-off point [m]",

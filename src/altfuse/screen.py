@@ -322,7 +322,9 @@ def screen_inputs(flight: FlightLog, span: tuple[float, float] | None) -> Flight
     if att is not None:
         angles = np.column_stack([att.roll, att.pitch, att.yaw])
         keep = rows(att.source, att.t, angles, -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
-        att = Attitude(att.source, att.t[keep], *angles[keep].T) if keep.any() else None
+        q = None if att.quaternion is None else att.quaternion[keep]
+        roll, pitch, yaw = angles[keep].T
+        att = Attitude(att.source, att.t[keep], roll, pitch, yaw, q) if keep.any() else None
     if vib is not None:
         both = np.column_stack([vib.level, vib.clips])
         keep = rows(vib.source, vib.t, both, 0.0, np.inf)

@@ -45,11 +45,13 @@ def read_log(path: str | Path) -> FlightLog:
     if not head:
         raise LogReadError(f"{path}: the file is empty")
     if head.startswith(ULOG_MAGIC):
-        raise LogReadError(
-            f"{path}: a PX4 ULog file; altfuse reads ArduPilot DataFlash (.bin) logs"
-        )
+        from altfuse.io.ulog import read_ulog
+
+        return read_ulog(path)
     if FMT_HEADER not in head:
-        raise LogReadError(f"{path}: not a DataFlash log (no FMT record in its first bytes)")
+        raise LogReadError(
+            f"{path}: not a DataFlash log (no FMT record in its first bytes) nor a ULog"
+        )
     from altfuse.io.dataflash import read_dataflash
 
     return read_dataflash(path)

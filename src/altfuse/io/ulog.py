@@ -1,0 +1,379 @@
+"""PX4 ULog logs (``.ulg``): the same :class:`~altfuse.model.FlightLog` as a DataFlash log gives.
+
+pyulog (PX4's own parser, BSD-3) decodes the file into numpy arrays per topic instance, as
+pymavlink serves DataFlash; this module picks the topics and turns them into altfuse's sources
+(``tests/test_ulog.py`` checks every value against pyulog's decoding):
+
+- **GPS**: ``vehicle_gps_position`` or ``sensor_gps``, whichever has more samples (one is the
+  autopilot's selection of the other's receivers), every instance (``gps``, ``gps2``, ...):
+  ``altitude_msl_m``, or ``alt`` [mm] before PX4 v1.14; samples with ``fix_type < 3`` dropped.
+  Its ``vel_m_s`` is the horizontal speed, ``-vel_d_m_s`` (where ``vel_ned_valid``) the vertical
+  velocity up.
+- **Barometer**: ``vehicle_air_data.baro_alt_meter`` (``baro``), else every ``sensor_baro``
+  instance: its ``altitude`` (PX4 before v1.8), else its ``pressure`` (Pa; mbar before v1.12)
+  through the standard atmosphere; else (PX4 before v1.7) ``sensor_combined.baro_alt_meter``,
+  each sample once. Its temperature beside it.
+- **Rangefinder**: every downward-facing ``distance_sensor`` instance (``orientation`` 25, or no
+  orientation field): ``current_distance``, less the samples outside ``min_distance`` ..
+  ``max_distance`` or with ``signal_quality`` 0 (invalid; -1 is unknown and kept). A distance
+  along the sensor's axis: the pipeline tilt-corrects it with the attitude.
+- **IMU**: ``sensor_combined.accelerometer_m_s2`` (FRD), each sample at ``timestamp +
+  accelerometer_timestamp_relative``. **Attitude**: ``vehicle_attitude.q`` (body FRD to NED),
+  kept as the quaternion (:class:`~altfuse.model.Attitude`), Euler angles beside it.
+- **References**: the EKF2 estimate as ``ekf`` (``vehicle_global_position.alt``, else
+  ``-vehicle_local_position.z``), the simulator's ``vehicle_global_position_groundtruth.alt``
+  (else ``-vehicle_local_position_groundtruth.z``) as ``sim``, the truth of
+  :mod:`altfuse.evaluation` (which checks it against the sensors before using it).
+
+Times: each topic's ``timestamp_sample`` where it has one (the sensor's own sample time), else
+``timestamp`` [us since boot]. A corrupt file (pyulog's ``file_corruption``: data it could not
+parse, skipped) is read as far as pyulog recovers, with a note; logging dropouts are noted too.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from importlib.metadata import version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from altfuse.errors import LogReadError
+from altfuse.model import Attitude, FlightLog, FloatArray, Imu, SensorKind, Series
+from altfuse.screen import MAX_BOOT_S
+
+#: The topics read (pyulog parses no other).
+TOPICS = (
+    "vehicle_gps_position",
+    "sensor_gps",
+    "vehicle_air_data",
+    "sensor_baro",
+    "distance_sensor",
+    "sensor_combined",
+    "vehicle_attitude",
+    "vehicle_global_position",
+    "vehicle_local_position",
+    "vehicle_global_position_groundtruth",
+    "vehicle_local_position_groundtruth",
+)
+#: ``distance_sensor.orientation`` of a sensor looking down (MAV_SENSOR_ROTATION_PITCH_270).
+DOWNWARD = 25
+#: The standard atmosphere's height from pressure [m]: ``44330.77 (1 - (p / p0)^0.190263)``.
+SEA_LEVEL_PA = 101325.0
+_ISA_EXPONENT = 0.190263
+_ISA_SCALE_M = 44330.77
+#: MAV_TYPE (the PX4 parameter) to altfuse's vehicle names (as DataFlash logs name them).
+_VEHICLE_OF = {1: "plane", 2: "copter", 3: "copter", 4: "copter", 10: "rover", 11: "rover",
+               12: "sub", 13: "copter", 14: "copter", 15: "copter", 19: "vtol", 20: "vtol",
+               21: "vtol", 22: "vtol", 23: "vtol", 24: "vtol", 25: "vtol"}  # fmt: skip
+_RELEASE_TYPES = {0: "dev", 64: "alpha", 128: "beta", 192: "rc", 255: ""}
+
+
+@dataclass
+class _Topics:
+    """The decoded topics of one file: per name, its instances' columns in ``multi_id`` order."""
+
+    instances: dict[str, list[dict[str, np.ndarray]]] = field(default_factory=dict)
+    start_s: float = 0.0  # subtracted from every time: 0, or the start of a wall-clock log
+
+    def of(self, name: str) -> list[dict[str, np.ndarray]]:
+        return self.instances.get(name, [])
+
+    def first(self, name: str, *columns: str) -> dict[str, np.ndarray] | None:
+        """The first instance of ``name`` that has every column in ``columns``."""
+        return next((d for d in self.of(name) if all(c in d for c in columns)), None)
+
+    def times(self, data: dict[str, np.ndarray], relative: str | None = None) -> FloatArray:
+        """A topic's sample times [s]: ``timestamp_sample`` where it has one (a driver that
+        does not fill it leaves 0), else ``timestamp`` (plus the column ``relative`` [us])."""
+        stamp = data["timestamp"].astype(np.float64)
+        if relative is not None:
+            stamp += data[relative]
+        elif "timestamp_sample" in data:
+            sample = data["timestamp_sample"].astype(np.float64)
+            stamp = np.where(sample > 0, sample, stamp)
+        return np.asarray(stamp / 1e6 - self.start_s)
+
+
+def read_ulog(path: str | Path) -> FlightLog:
+    """Read the altitude sources, IMU, attitude and references from a ULog file.
+
+    Raises
+    ------
+    LogReadError
+        pyulog cannot parse the file (a truncated header, not a ULog).
+    """
+    from altfuse.io import sha256_of
+
+    path = Path(path)
+    ulog, printed = _parse(path)
+    notes = [f"pyulog: {line}" for line in printed]
+    damaged = []
+    if ulog.file_corruption:
+        damaged.append("corrupt: pyulog skipped the data it could not parse (read up to the rest)")
+        notes.insert(0, damaged[0])
+    topics = _Topics()
+    if ulog.start_timestamp / 1e6 > MAX_BOOT_S:  # a simulator logging the wall clock
+        topics.start_s = ulog.start_timestamp / 1e6
+        notes.append(
+            f"timestamps are Unix time: taken from the log's start ({topics.start_s:.0f} s)"
+        )
+    counts: dict[str, int] = {}
+    for d in sorted(ulog.data_list, key=lambda d: (d.name, d.multi_id)):
+        topics.instances.setdefault(d.name, []).append(d.data)
+        counts[f"{d.name}[{d.multi_id}]"] = int(d.data["timestamp"].size)
+    if ulog.dropouts:
+        lost = sum(d.duration for d in ulog.dropouts) / 1e3
+        notes.append(f"{len(ulog.dropouts)} logging dropouts, {lost:.1f} s in all")
+    params = {k: float(v) for k, v in ulog.initial_parameters.items()}
+    sensors = _Sensors()
+    _read_gps(topics, sensors)
+    _read_baro(topics, sensors)
+    _read_distance(topics, sensors)
+    return FlightLog(
+        path=str(path),
+        sha256=sha256_of(path),
+        size_bytes=path.stat().st_size,
+        vehicle=_VEHICLE_OF.get(int(params.get("MAV_TYPE", -1)), "unknown"),
+        firmware=_firmware(ulog.msg_info_dict),
+        sensors=tuple(sensors.found),
+        references=tuple(_references(topics)),
+        imu=_imu(topics),
+        attitude=_attitude(topics),
+        record_counts=dict(sorted(counts.items())),
+        skipped_bytes=0,  # pyulog does not count them: a corrupt file says so in ``damaged``
+        notes=tuple(notes),
+        dropped_sources=sensors.dropped,
+        params=params,
+        ground_speed=sensors.speed,
+        vertical_velocity=sensors.climb,
+        temperatures=sensors.temperatures,
+        damaged=tuple(damaged),
+        reader=f"ULog (pyulog {version('pyulog')})",
+    )
+
+
+def _parse(path: Path) -> tuple[Any, list[str]]:
+    """pyulog's decoding of the topics altfuse reads, and what it printed meanwhile (its
+    warnings on a corrupt file go to standard output, where a CSV may be going)."""
+    from pyulog import ULog
+
+    captured = io.StringIO()
+    try:  # the file opened here: pyulog leaves its own handle open when it raises
+        with path.open("rb") as handle, contextlib.redirect_stdout(captured):
+            ulog = ULog(handle, list(TOPICS))
+    except OSError as exc:
+        raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
+    except Exception as exc:  # pyulog raises what its parsing meets (struct.error, ...)
+        raise LogReadError(f"{path}: not a readable ULog file ({exc})") from exc
+    printed = [line.strip() for line in captured.getvalue().splitlines() if line.strip()]
+    return ulog, sorted(set(printed), key=printed.index)
+
+
+@dataclass
+class _Sensors:
+    """The sources found, with the reason for every one left out."""
+
+    found: list[Series] = field(default_factory=list)
+    dropped: dict[str, str] = field(default_factory=dict)
+    temperatures: dict[str, Series] = field(default_factory=dict)
+    speed: Series | None = None
+    climb: Series | None = None
+
+    def add(  # noqa: PLR0913 (what one source is, by name)
+        self,
+        name: str,
+        kind: SensorKind,
+        source: str,
+        datum: str,
+        t: FloatArray,
+        value: FloatArray,
+        invalid: dict[str, np.ndarray],
+    ) -> None:
+        keep = np.isfinite(t) & np.isfinite(value)
+        dropped = {"not a finite number": int((~keep).sum())} if (~keep).any() else {}
+        for reason, mask in invalid.items():
+            if (hit := keep & mask).any():
+                dropped[reason] = int(hit.sum())
+            keep &= ~mask
+        if not keep.any():
+            detail = ", ".join(f"{n} {r}" for r, n in dropped.items()) or "no samples"
+            self.dropped[name] = f"{source}: no usable sample ({detail})"
+            return
+        self.found.append(Series(name, kind, source, datum, t[keep], value[keep], dropped))
+
+
+def _names(kind: str) -> Iterator[str]:
+    """``gps``, ``gps2``, ``gps3``, ..."""
+    yield kind
+    for k in range(2, 1000):
+        yield f"{kind}{k}"
+
+
+def _read_gps(topics: _Topics, sensors: _Sensors) -> None:
+    topic = max(
+        ("vehicle_gps_position", "sensor_gps"),
+        key=lambda n: sum(d["timestamp"].size for d in topics.of(n)),
+    )
+    instances = [d for d in topics.of(topic) if "fix_type" in d]
+    for k, (name, d) in enumerate(zip(_names("gps"), instances, strict=False)):
+        if "altitude_msl_m" in d:
+            column, value = "altitude_msl_m", d["altitude_msl_m"].astype(np.float64)
+        elif "alt" in d:
+            column, value = "alt", d["alt"].astype(np.float64) / 1e3  # mm
+        else:
+            sensors.dropped[name] = f"{topic}[{k}] has no altitude field"
+            continue
+        t, fixed = topics.times(d), d["fix_type"] >= 3
+        source = f"{topic}[{k}].{column}"
+        sensors.add(name, "gps", source, "AMSL", t, value, {"fix_type < 3": ~fixed})
+        if k == 0 and "vel_m_s" in d:
+            sensors.speed = _series("ground_speed", "speed", f"{topic}[0].vel_m_s", "horizontal",
+                                    t, d["vel_m_s"], fixed)  # fmt: skip
+        if k == 0 and "vel_d_m_s" in d:
+            valid = fixed & (d["vel_ned_valid"] != 0) if "vel_ned_valid" in d else fixed
+            sensors.climb = _series("gps_velocity_up", "velocity", f"{topic}[0].-vel_d_m_s", "up",
+                                    t, -d["vel_d_m_s"], valid)  # fmt: skip
+
+
+def _series(  # noqa: PLR0913 (a Series' fields)
+    name: str, kind: Any, source: str, datum: str, t: FloatArray, v: np.ndarray, keep: np.ndarray
+) -> Series | None:
+    value = np.asarray(v, dtype=np.float64)
+    keep = keep & np.isfinite(t) & np.isfinite(value)
+    return Series(name, kind, source, datum, t[keep], value[keep]) if keep.any() else None
+
+
+def pressure_altitude(pressure_pa: FloatArray) -> FloatArray:
+    """Height [m] of a pressure [Pa] in the standard atmosphere (as PX4 computes
+    ``baro_alt_meter`` with its default sea-level pressure)."""
+    ratio = np.asarray(pressure_pa, dtype=np.float64) / SEA_LEVEL_PA
+    return np.asarray(_ISA_SCALE_M * (1.0 - np.power(ratio, _ISA_EXPONENT)))
+
+
+def _read_baro(topics: _Topics, sensors: _Sensors) -> None:
+    air = topics.first("vehicle_air_data", "baro_alt_meter")
+    combined = topics.first("sensor_combined", "baro_alt_meter", "baro_timestamp_relative")
+    if air is not None:
+        sources = [("vehicle_air_data[0].baro_alt_meter", air, air["baro_alt_meter"])]
+    elif combined is not None and not topics.of("sensor_baro"):  # PX4 before v1.7
+        stamp = combined["timestamp"] + combined["baro_timestamp_relative"].astype(np.int64)
+        fresh = np.concatenate(([True], np.diff(stamp) != 0))  # repeated until the next sample
+        d = {"timestamp": stamp[fresh], "baro_temp_celcius": combined["baro_temp_celcius"][fresh]}
+        value = combined["baro_alt_meter"][fresh]
+        sources = [("sensor_combined.baro_alt_meter", d, value)]
+    else:
+        sources = []
+        for k, d in enumerate(topics.of("sensor_baro")):
+            if "altitude" in d:
+                sources.append((f"sensor_baro[{k}].altitude", d, d["altitude"]))
+            elif "pressure" in d:
+                p = d["pressure"].astype(np.float64)
+                pa = p if np.nanmedian(p) > 2000.0 else p * 100.0  # mbar before PX4 v1.12
+                sources.append((f"sensor_baro[{k}].pressure (standard atmosphere)", d,
+                                pressure_altitude(pa)))  # fmt: skip
+    for name, (source, d, value) in zip(_names("baro"), sources, strict=False):
+        t = topics.times(d)
+        sensors.add(name, "baro", source, "baro calibration", t, value.astype(np.float64), {})
+        for column in ("baro_temp_celcius", "ambient_temperature", "temperature"):
+            if column in d:
+                where = source.split(".")[0]
+                kept = _series(name, "temperature", f"{where}.{column}", "degC", t, d[column],
+                               np.ones(t.size, dtype=bool))  # fmt: skip
+                if kept is not None:
+                    sensors.temperatures[name] = kept
+                break
+
+
+def _read_distance(topics: _Topics, sensors: _Sensors) -> None:
+    down = [
+        (k, d)
+        for k, d in enumerate(topics.of("distance_sensor"))
+        if "current_distance" in d
+        and ("orientation" not in d or (d["orientation"] == DOWNWARD).all())
+    ]
+    for name, (k, d) in zip(_names("rangefinder"), down, strict=False):
+        value = d["current_distance"].astype(np.float64)
+        invalid: dict[str, np.ndarray] = {}
+        if "min_distance" in d and "max_distance" in d:
+            invalid["outside min_distance..max_distance"] = (value < d["min_distance"]) | (
+                value > d["max_distance"]
+            )
+        if "signal_quality" in d:
+            invalid["signal_quality 0 (invalid)"] = d["signal_quality"] == 0
+        source = f"distance_sensor[{k}].current_distance"
+        sensors.add(name, "rangefinder", source, "ground below the vehicle", topics.times(d), value,
+                    invalid)  # fmt: skip
+
+
+def _imu(topics: _Topics) -> Imu | None:
+    axes = [f"accelerometer_m_s2[{i}]" for i in range(3)]
+    d = topics.first("sensor_combined", *axes)
+    if d is None:
+        return None
+    relative = "accelerometer_timestamp_relative"
+    t = topics.times(d, relative if relative in d else None)
+    acc = np.column_stack([d[a].astype(np.float64) for a in axes])
+    return Imu("sensor_combined.accelerometer_m_s2", t, acc)
+
+
+def _attitude(topics: _Topics) -> Attitude | None:
+    d = topics.first("vehicle_attitude", "q[0]", "q[1]", "q[2]", "q[3]")
+    if d is None:
+        return None
+    q = np.column_stack([d[f"q[{i}]"].astype(np.float64) for i in range(4)])
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    # ZYX Euler angles of the body-to-NED rotation, for the record and the screening
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return Attitude("vehicle_attitude.q", topics.times(d), roll, pitch, yaw, quaternion=q)
+
+
+def _references(topics: _Topics) -> list[Series]:
+    """The EKF2 estimate (``ekf``) and the simulator's groundtruth (``sim``): each topic's
+    global altitude, else its local position's ``-z``."""
+    out = []
+    for name, suffix, what in (("ekf", "", "EKF2"), ("sim", "_groundtruth", "simulator truth")):
+        found = _reference(
+            topics, name, f"vehicle_global_position{suffix}", "alt", f"AMSL ({what})"
+        ) or _reference(
+            topics, name, f"vehicle_local_position{suffix}", "z", f"{what} origin", sign=-1.0
+        )
+        if found is not None:
+            out.append(found)
+    return out
+
+
+def _reference(
+    topics: _Topics, name: str, topic: str, column: str, datum: str, sign: float = 1.0
+) -> Series | None:
+    d = topics.first(topic, column)
+    if d is None:
+        return None
+    t = topics.times(d)
+    source = f"{topic}.{'-' if sign < 0 else ''}{column}"
+    return _series(name, "reference", source, datum, t, sign * d[column].astype(np.float64),
+                   np.ones(t.size, dtype=bool))  # fmt: skip
+
+
+def _firmware(info: dict[str, Any]) -> str:
+    """``PX4 v1.9.0-beta (654ed4b9)`` from the log's version fields."""
+    release = info.get("ver_sw_release")
+    text = "PX4"
+    if isinstance(release, int) and release:
+        major, minor, patch, kind = (
+            (release >> 24) & 0xFF,
+            (release >> 16) & 0xFF,
+            (release >> 8) & 0xFF,
+            release & 0xFF,
+        )
+        tag = _RELEASE_TYPES.get(kind, "")
+        text += f" v{major}.{minor}.{patch}" + (f"-{tag}" if tag else "")
+    commit = str(info.get("ver_sw", ""))[:8]
+    return text + (f" ({commit})" if commit else "")

@@ -1,0 +1,208 @@
+"""PX4 ULog input (issue 18): the reader against pyulog's decoding, every shared ULog fused or
+refused in one line, the simulator's truth checked before it is used."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from pyulog import ULog
+
+from altfuse.cli import cli
+from altfuse.errors import NoUsableSensorsError
+from altfuse.evaluation import evaluate
+from altfuse.io import read_log
+from altfuse.io.ulog import TOPICS, pressure_altitude
+from altfuse.model import Attitude, Series
+from conftest import SAMPLE_LOG, shared_log
+
+#: Every ULog in ../shared/logs/px4 and what ``altfuse fuse`` makes of it: ok (with the warning
+#: line it must print, if any) or refused (with the reason's words).
+OUTCOMES = {
+    "px4_sitl_stifael_14_19_29.ulg": ("ok", None),
+    "px4_sitl_yuneec_parameterchange.ulg": ("ok", None),
+    "px4_sitl_yuneec_position.ulg": ("ok", None),
+    "px4ulogrs_6ba1abc7-b433-4029-b8f5-3b2bb12d3b6c.ulg": ("ok", None),
+    "px4ulogrs_corrupt_actuator_armed_wrong_size.ulg": ("refused", "1 usable altitude source"),
+    "px4ulogrs_corrupt_unregistered_msg_id.ulg": ("ok", "corrupt: pyulog skipped the data"),
+    "px4ulogrs_esc_status_log.ulg": ("ok", None),
+    "px4ulogrs_quadrotor_local.ulg": ("refused", "926 fix_type < 3"),
+    "pyulog_sample_appended_multiple.ulg": ("refused", "1 usable altitude source (baro)"),
+    "pyulog_sample_log_small.ulg": ("ok", None),
+    "pyulog_sample_logging_tagged_and_default_params.ulg": ("ok", None),
+    "pyulog_sample_px4_events.ulg": ("ok", None),
+}
+
+
+def test_the_outcomes_name_every_shared_ulog() -> None:
+    folder = shared_log("px4")
+    assert sorted(p.name for p in folder.glob("*.ulg")) == sorted(OUTCOMES)
+
+
+@pytest.mark.parametrize("name", sorted(OUTCOMES))
+def test_every_shared_ulog_is_fused_or_refused_in_one_line(name: str, tmp_path: Path) -> None:
+    log = shared_log(f"px4/{name}")
+    outcome, words = OUTCOMES[name]
+    result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(tmp_path / "out.csv")])
+    lines = result.stderr.splitlines()
+    if outcome == "refused":
+        assert result.exit_code == 1
+        assert len(lines) == 1
+        assert lines[0].startswith("altfuse: error: ")
+        assert words in lines[0]
+        assert not list(tmp_path.iterdir())  # nothing half-written
+        return
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "out.csv").exists()
+    assert "Traceback" not in result.output
+    assert "pyulog" not in result.stdout  # its prints do not reach standard output
+    if words is None:
+        assert lines == []
+    else:
+        assert len(lines) == 1
+        assert lines[0].startswith("altfuse: warning: ")
+        assert words in lines[0]
+
+
+def _pyulog(log: Path) -> dict[str, list[dict[str, np.ndarray]]]:
+    ulog = ULog(str(log), list(TOPICS))
+    out: dict[str, list[dict[str, np.ndarray]]] = {}
+    for d in sorted(ulog.data_list, key=lambda d: (d.name, d.multi_id)):
+        out.setdefault(d.name, []).append(d.data)
+    return out
+
+
+def _raw(series: Series, topics: dict[str, list[dict[str, np.ndarray]]]) -> tuple[Any, Any]:
+    """The pyulog arrays behind ``series``: its topic instance's times [us] and column."""
+    match = re.match(r"(\w+)(?:\[(\d+)\])?\.(-?)(\w+(?:\[\d\])?)", series.source)
+    assert match, series.source
+    topic, k, _, column = match.groups()
+    data = topics[topic][int(k or 0)]
+    stamp = data["timestamp"].astype(np.float64)
+    if "timestamp_sample" in data:
+        stamp = np.where(data["timestamp_sample"] > 0, data["timestamp_sample"], stamp)
+    return stamp, data[column]
+
+
+PARITY_LOGS = [n for n, (outcome, _) in OUTCOMES.items() if outcome == "ok"]
+
+
+@pytest.mark.parametrize("name", PARITY_LOGS)
+def test_every_extracted_value_is_pyulog_s(name: str) -> None:
+    """Acceptance 2: each sample of each source and reference is pyulog's value at pyulog's
+    time (the reader's selection and units, and nothing else, in between)."""
+    log = shared_log(f"px4/{name}")
+    flight = read_log(log)
+    topics = _pyulog(log)
+    start = 0.0
+    if any("Unix time" in note for note in flight.notes):
+        start = ULog(str(log), ["vehicle_attitude"]).start_timestamp / 1e6
+    checked = 0
+    for series in (*flight.sensors, *flight.references):
+        stamp, column = _raw(series, topics)
+        if series.source.startswith("sensor_combined") or "standard atmosphere" in series.source:
+            continue  # derived: checked below
+        at = np.searchsorted(stamp / 1e6 - start, series.t)
+        np.testing.assert_array_equal(stamp[at] / 1e6 - start, series.t)
+        expected = column[at].astype(np.float64)
+        if series.source.endswith(".alt") and series.kind == "gps":
+            expected = expected / 1e3  # mm before PX4 v1.14
+        if ".-" in series.source:
+            expected = -expected
+        np.testing.assert_array_equal(series.value, expected, err_msg=series.source)
+        checked += 1
+    assert checked >= 2
+    imu = flight.imu
+    assert imu is not None
+    combined = topics["sensor_combined"][0]
+    t = (combined["timestamp"] + combined["accelerometer_timestamp_relative"]) / 1e6 - start
+    np.testing.assert_array_equal(imu.t, t)
+    for i in range(3):
+        np.testing.assert_array_equal(imu.acc[:, i], combined[f"accelerometer_m_s2[{i}]"])
+    att = flight.attitude
+    assert att is not None
+    assert att.quaternion is not None
+    q = np.column_stack([topics["vehicle_attitude"][0][f"q[{i}]"].astype(float) for i in range(4)])
+    np.testing.assert_allclose(att.quaternion, q / np.linalg.norm(q, axis=1, keepdims=True))
+
+
+def test_a_pressure_becomes_the_standard_atmosphere_s_height() -> None:
+    """sensor_baro's pressure (PX4 v1.12 on) as PX4's own baro_alt_meter with its default
+    sea-level pressure: 101325 Pa is 0 m, 89875 Pa about 1000 m."""
+    np.testing.assert_allclose(
+        pressure_altitude(np.array([101325.0, 89874.6])), [0, 1000], atol=0.5
+    )
+
+
+def test_the_quaternion_gives_the_euler_angles_down_row() -> None:
+    """The rotation's last row from the quaternion equals the Euler angles' (ZYX), and
+    interpolating across the quaternion's sign flip (q and -q: one rotation) stays on it."""
+    rng = np.random.default_rng(3)
+    roll, pitch, yaw = rng.uniform(-3, 3, 50), rng.uniform(-1.5, 1.5, 50), rng.uniform(-3, 3, 50)
+    cr, sr, cp, sp, cy, sy = (f(a / 2) for a in (roll, pitch, yaw) for f in (np.cos, np.sin))
+    q = np.column_stack([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                         cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])  # fmt: skip
+    t = np.arange(50.0)
+    euler = Attitude("ATT", t, roll, pitch, yaw)
+    quaternion = Attitude(
+        "q", t, roll, pitch, yaw, quaternion=q * np.sign(rng.normal(size=(50, 1)))
+    )
+    np.testing.assert_allclose(quaternion.down_at(t), euler.down_at(t), atol=1e-12)
+    # level, then the same attitude written as -q: halfway is level, not a half-turn
+    level = np.array([[1.0, 0, 0, 0], [-1.0, 0, 0, 0]])
+    flipped = Attitude("q", np.array([0.0, 1.0]), np.zeros(2), np.zeros(2), np.zeros(2), level)
+    np.testing.assert_allclose(flipped.down_at(np.array([0.5])), [[0, 0, 1]], atol=1e-12)
+
+
+def test_a_truth_that_moves_against_the_sensors_is_refused() -> None:
+    """Acceptance 3's check: PX4 v1.7.3 and v1.8.0's simulator groundtruth climbs when the vehicle
+    descends (Gazebo's sign error of 2018); it is not the truth. The v1.9 log's is."""
+    inverted = shared_log("px4/px4_sitl_yuneec_parameterchange.ulg")
+    with pytest.raises(NoUsableSensorsError, match=r"correlation -1\.00.*opposite"):
+        evaluate(inverted, ["mean"], truth="sim")
+    fallback = evaluate(inverted, ["mean"])
+    assert fallback.truth.name == "ekf"
+    assert fallback.truth.is_reference
+    assert "refused as truth" in fallback.truth.label
+    good = evaluate(shared_log("px4/px4_sitl_yuneec_position.ulg"), ["smoother"], truth="sim")
+    assert good.truth.source == "vehicle_global_position_groundtruth.alt"
+    assert not good.truth.refused
+    smoother = next(r for r in good.rows if r.name == "smoother")
+    ekf = next(r for r in good.rows if r.kind == "onboard")
+    assert smoother.overall.rmse < 0.02 < ekf.overall.rmse
+
+
+def test_a_batch_takes_dataflash_and_ulog_together(tmp_path: Path) -> None:
+    """Acceptance 4: the default pattern takes .bin and .ulg into one summary."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "mission.bin").write_bytes(SAMPLE_LOG.read_bytes())
+    ulog = shared_log("px4/px4ulogrs_esc_status_log.ulg")
+    (logs / "px4.ULG").write_bytes(ulog.read_bytes())
+    result = CliRunner().invoke(cli, ["batch", str(logs), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    summary = (tmp_path / "out" / "summary.csv").read_text()
+    assert "mission.bin,ok" in summary
+    assert "px4.ULG,ok" in summary
+    assert "PX4 v1.9.0-beta" in summary
+    assert (tmp_path / "out" / "px4.csv").exists()
+
+
+def test_a_truncated_or_broken_ulog_is_one_line(tmp_path: Path) -> None:
+    source = shared_log("px4/px4ulogrs_esc_status_log.ulg").read_bytes()
+    for size, words in ((10, "not a readable ULog file"), (3000, "no usable altitude source")):
+        cut = tmp_path / f"cut{size}.ulg"
+        cut.write_bytes(source[:size])
+        result = CliRunner().invoke(cli, ["fuse", str(cut), "-o", str(tmp_path / "x.csv")])
+        assert result.exit_code == 1
+        assert result.stderr.count("\n") == 1
+        assert words in result.stderr
+    half = tmp_path / "half.ulg"
+    half.write_bytes(source[: len(source) // 2])
+    result = CliRunner().invoke(cli, ["fuse", str(half), "-o", str(tmp_path / "half.csv")])
+    assert result.exit_code == 0, result.output  # read up to the cut
+    assert half.read_bytes() == source[: len(source) // 2]  # the input untouched
