@@ -13,6 +13,10 @@ fresh process (so that peak memory is that of the measurement alone):
 - ``plain``: one numpy pass over the file's bytes (read them, count the 0xA3 bytes);
 - ``altfuse fuse`` end to end as a user runs it, writing CSV and writing Parquet.
 
+With ``--ulog-mb`` (issue 18), the ULog reader instead: a ULog of that size built from a shared
+PX4 log (its data repeated with shifted times, written by pyulog), read by ``read_log`` (pyulog's
+parsing, the sources, the sha256) against the plain pass.
+
 With ``--adversarial-mb`` (issue 16), the reader's index on two hostile files beside a clean
 one of the same size (built as above): the source log followed by repeated header bytes
 (``A3 95 80``, FMT's header), and the clean log with a decoy header (``A3 95`` and the
@@ -73,6 +77,41 @@ def build(source: Path, target: Path, megabytes: float) -> int:
             body[where[:, None] + np.arange(8)] = shifted
             out.write(body.tobytes())
     return target.stat().st_size
+
+
+ULOG_SOURCE = ROOT.parent / "shared" / "logs" / "px4" / "px4ulogrs_quadrotor_local.ulg"
+
+
+def build_ulog(source: Path, target: Path, megabytes: float) -> int:
+    """Write a ULog of about ``megabytes`` MB from ``source``; return its size in bytes."""
+    from pyulog import ULog
+
+    ulog = ULog(str(source))
+    span = ulog.last_timestamp - ulog.start_timestamp + 1_000_000
+    copies = int(np.ceil(megabytes * 1e6 / source.stat().st_size))
+    for d in ulog.data_list:
+        for key, v in d.data.items():
+            if key in ("timestamp", "timestamp_sample"):  # 0: a sample time not filled
+                shifts = [v + (v > 0) * v.dtype.type(k * span) for k in range(copies)]
+                d.data[key] = np.concatenate(shifts)
+            else:
+                d.data[key] = np.tile(v, copies)
+    ulog.write_ulog(str(target))
+    return target.stat().st_size
+
+
+def ulog_case(megabytes: float, repeat: int) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "big.ulg"
+        size = build_ulog(ULOG_SOURCE, path, megabytes)
+        plain = median_of(repeat, "plain", path)
+        ours = median_of(repeat, "read_log", path)
+        print(
+            f"{path.name} built from {ULOG_SOURCE.name}: {size / 1e6:.1f} MB; plain numpy pass "
+            f"{plain['seconds']:.2f} s; read_log {ours['seconds']:.2f} s "
+            f"({ours['seconds'] / plain['seconds']:.1f}x the plain pass, "
+            f"{ours['seconds'] / size * 1e9:.1f} s per GB), peak {ours['peak_mb']:.0f} MB"
+        )
 
 
 def hostile(clean: Path, source: Path, folder: Path) -> dict[str, Path]:
@@ -203,7 +242,11 @@ def main() -> None:
     parser.add_argument(
         "--adversarial-mb", type=float, help="only the hostile files of this size (and a clean one)"
     )
+    parser.add_argument("--ulog-mb", type=float, help="only a ULog of this size")
     args = parser.parse_args()
+    if args.ulog_mb:
+        ulog_case(args.ulog_mb, args.repeat)
+        return
     if args.adversarial_mb:
         adversarial(args.source, args.adversarial_mb, args.repeat)
         return
