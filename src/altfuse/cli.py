@@ -131,7 +131,7 @@ class _Cli(click.Group):
 @click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")
 @click.option("--debug", is_flag=True, help="Show the traceback of an internal error.")
 def cli(verbose: int, quiet: bool, debug: bool) -> None:  # noqa: ARG001 (read in main)
-    """Fuse the altitude sensors of ArduPilot DataFlash logs after the flight.
+    """Fuse the altitude sensors of ArduPilot DataFlash logs and PX4 ULogs after the flight.
 
     \b
     Example:
