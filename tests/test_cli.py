@@ -342,3 +342,36 @@ def test_the_command_holds_numpy_s_thread_pools_to_one_thread(
         [sys.executable, "-c", POOLS], env=env, capture_output=True, text=True, check=True
     )
     assert done.stdout.split()[-1] == threads
+
+
+def test_a_bare_altfuse_prints_the_help() -> None:
+    """Issue 19: the help as --help prints it, not squashed onto one error line."""
+    result = CliRunner().invoke(cli, [])
+    assert result.exit_code == 0
+    assert result.stdout == CliRunner().invoke(cli, ["--help"]).stdout
+    assert "Commands:" in result.stdout
+    assert result.stdout.count("\n") > 10
+
+
+def test_the_global_flags_work_after_the_command(tmp_path: Path) -> None:
+    """Issue 19: -v, -q and --debug after the command, as before it; after "--" they are
+    arguments."""
+    out = tmp_path / "m.csv"
+    result = run("fuse", SAMPLE_LOG, "-o", out, "-v")
+    assert result.exit_code == 0, result.output
+    assert "altfuse: info: mission.bin: reading" in result.stderr
+    quiet = run("fuse", SAMPLE_LOG, "-o", out, "--force", "-q")
+    assert quiet.exit_code == 0
+    assert quiet.stderr == ""  # not even the warning line
+    literal = run("info", "--", "-v")
+    assert literal.exit_code == 1
+    assert "-v: no such file" in literal.stderr
+
+
+@pytest.mark.parametrize("command", ["fuse", "evaluate", "batch", "info", "simulate"])
+def test_every_command_s_help_gives_its_exit_codes(command: str) -> None:
+    text = " ".join(run(command, "--help").stdout.split())
+    assert "Exit codes: 0 done; 1 the log cannot be processed" in text
+    assert "2 a usage or parameter error" in text
+    if command == "batch":
+        assert "4 when some failed" in text

@@ -41,6 +41,15 @@ def test_segments_by_length_and_by_boundaries() -> None:
     assert list(parse_segments("30,70", t).values()) == [(0.0, 30.0), (30.0, 70.0), (70.0, 100.0)]
     with pytest.raises(ParameterError, match=r"^segments takes seconds or boundaries, got 'soon'"):
         parse_segments("soon", t)
+    # issue 19: a boundary outside the log is said, not silently dropped
+    with pytest.raises(ParameterError, match=r"^segments 150, -5 s outside the log's clock"):
+        parse_segments("30,150,-5", t)
+
+
+def test_a_folder_given_to_fuse_points_to_batch(tmp_path: Path) -> None:
+    result = CliRunner().invoke(cli, ["fuse", str(tmp_path), "-o", str(tmp_path / "x.csv")])
+    assert result.exit_code == 1
+    assert "a folder, not a log; for its logs: altfuse batch" in result.stderr
 
 
 def test_simulated_log_is_measured_against_the_sim_truth() -> None:
@@ -152,3 +161,19 @@ def test_plot_needs_a_known_format(tmp_path: Path) -> None:
     assert result.exit_code == 2
     assert "--plot must end in .png or .svg" in result.stderr
     assert not out.exists()
+
+
+def test_the_table_s_columns_stay_apart_at_any_magnitude() -> None:
+    """Issue 19: 19793.323 beside 12698.125 ran together in fixed-width columns."""
+    from altfuse.commands import _aligned, _stats_cells
+    from altfuse.metrics import ErrorStats
+
+    huge = ErrorStats(n=1234567, rmse=19793.32312, mae=12698.125, max_abs=-1e7, bias=-98765.4)
+    small = ErrorStats(n=3, rmse=0.01, mae=0.01, max_abs=0.02, bias=0.0)
+    lines = _aligned(
+        [["name", "kind", "RMSE", "MAE", "max", "bias", "n"],
+         _stats_cells("a-long-method-name", "method", huge), _stats_cells("gps", "sensor", small)]
+    )  # fmt: skip
+    assert [len(line.split()) for line in lines] == [7, 7, 7]
+    assert lines[1].split()[2:4] == ["19793.323", "12698.125"]
+    assert len({len(line) for line in lines}) == 1  # numbers right-aligned to one edge

@@ -28,6 +28,14 @@ from altfuse.params import InvalidParameter
 from altfuse.signals import EXIT_TERMINATED, Terminated, interruption, raise_on_sigterm
 
 EXIT_BUG = 3
+#: Every command's exit codes, at the end of its help (batch adds its own 4).
+EXIT_CODES = (
+    "Exit codes: 0 done; 1 the log cannot be processed (missing, damaged beyond reading, too few "
+    "altitude sources) or an output cannot be written; 2 a usage or parameter error; 3 a bug "
+    "(--debug shows it); 130 interrupted, 143 terminated."
+)
+#: The group's options, taken after the command too (``altfuse fuse in.bin -o x.csv -v``).
+GLOBAL_FLAGS = frozenset({"-v", "-vv", "-vvv", "--verbose", "-q", "--quiet", "--debug"})
 
 #: Each command and the first sentence of its help (shown by ``altfuse --help`` without
 #: importing it; tests/test_cli.py checks each against the command's own).
@@ -92,6 +100,8 @@ class _Cli(click.Group):
         if cmd_name not in COMMANDS:
             return None
         command: click.Command = getattr(importlib.import_module("altfuse.commands"), cmd_name)
+        if not command.epilog or EXIT_CODES not in command.epilog:
+            command.epilog = EXIT_CODES + (f" {command.epilog}" if command.epilog else "")
         return command
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:  # noqa: ARG002
@@ -100,13 +110,17 @@ class _Cli(click.Group):
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
         kwargs["standalone_mode"] = False
-        argv = kwargs.get("args", args[0] if args else None)
-        debug = "--debug" in (sys.argv[1:] if argv is None else list(argv))
+        given = kwargs.pop("args", args[0] if args else None)
+        argv = _global_flags_first(list(sys.argv[1:] if given is None else given))
+        debug = "--debug" in argv
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("always")  # each to the debug log
                 warnings.showwarning = _log_warning
-                code = super().main(*args, **kwargs)
+                code = super().main(argv, *args[1:], **kwargs)
+        except click.exceptions.NoArgsIsHelpError as exc:  # bare altfuse: the help, as --help
+            click.echo(exc.ctx.get_help() if exc.ctx else exc.format_message())
+            code = 0
         except (click.exceptions.Abort, KeyboardInterrupt, Terminated) as exc:
             _fail_signalled(exc)
         except click.ClickException as exc:
@@ -123,6 +137,19 @@ class _Cli(click.Group):
                 traceback.print_exc()
             _fail(f"internal error: {type(exc).__name__}: {exc} (rerun with --debug)", EXIT_BUG)
         sys.exit(code if isinstance(code, int) else 0)
+
+
+def _global_flags_first(argv: list[str]) -> list[str]:
+    """``argv`` with the group's flags found after the command (before any ``--``) moved in
+    front of it, where click takes them."""
+    command = next((i for i, a in enumerate(argv) if a in COMMANDS), None)
+    if command is None:
+        return argv
+    rest = argv[command:]
+    end = rest.index("--") if "--" in rest else len(rest)
+    moved = [a for a in rest[:end] if a in GLOBAL_FLAGS]
+    kept = [a for a in rest[:end] if a not in GLOBAL_FLAGS]
+    return argv[:command] + moved + kept + rest[end:]
 
 
 @click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})

@@ -206,7 +206,8 @@ def _method_values(options: dict[str, Any]) -> dict[str, Any]:
     return values
 
 
-_LOG_ARG = click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
+# a folder is taken: read_log says it is one, and points to batch
+_LOG_ARG = click.argument("log", type=click.Path(path_type=Path))
 _PATH = click.Path(dir_okay=False, path_type=Path)
 
 
@@ -348,10 +349,25 @@ def _progress_line() -> Iterator[None]:
         handler.close()
 
 
-def _stats_line(name: str, kind: str, s: ErrorStats) -> str:
-    return (
-        f"{name:<13}{kind:<9}{s.rmse:>9.3f}{s.mae:>9.3f}{s.max_abs:>9.3f}{s.bias:>+10.3f}{s.n:>7}"
-    )
+_STATS_HEADER = ("name", "kind", "RMSE", "MAE", "max", "bias", "n")
+
+
+def _stats_cells(name: str, kind: str, s: ErrorStats) -> list[str]:
+    return [name, kind, f"{s.rmse:.3f}", f"{s.mae:.3f}", f"{s.max_abs:.3f}", f"{s.bias:+.3f}",
+            str(s.n)]  # fmt: skip
+
+
+def _aligned(rows: list[list[str]]) -> list[str]:
+    """Rows of cells as lines, each column as wide as its widest cell and two spaces apart at
+    any magnitude: names to the left, numbers to the right."""
+    widths = [max(len(r[j]) for r in rows) for j in range(len(rows[0]))]
+    return [
+        "  ".join(
+            c.ljust(w) if j < 2 else c.rjust(w)
+            for j, (c, w) in enumerate(zip(r, widths, strict=True))
+        ).rstrip()
+        for r in rows
+    ]
 
 
 @click.command(cls=_MethodCommand, choose="many")
@@ -410,14 +426,20 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
         f"{log.name}: measured against {result.truth.label}, {t.size} ticks "
         f"({t[0]:.1f}-{t[-1]:.1f} s), errors in m"
     )
-    header = f"{'name':<13}{'kind':<9}{'RMSE':>9}{'MAE':>9}{'max':>9}{'bias':>10}{'n':>7}"
-    click.echo(header)
-    for row in result.rows:
-        click.echo(_stats_line(row.name, row.kind, row.overall))
-    for label in result.segments:
-        click.echo(f"segment {label}:")
-        for row in result.rows:
-            click.echo(_stats_line(row.name, row.kind, row.segments[label]))
+    sections = [[r.overall for r in result.rows]]
+    sections += [[r.segments[label] for r in result.rows] for label in result.segments]
+    cells = [list(_STATS_HEADER)] + [
+        _stats_cells(row.name, row.kind, stats)
+        for section in sections
+        for row, stats in zip(result.rows, section, strict=True)
+    ]
+    lines = iter(_aligned(cells))
+    click.echo(next(lines))
+    for k, section in enumerate(sections):
+        if k:
+            click.echo(f"segment {list(result.segments)[k - 1]}:")
+        for _ in section:
+            click.echo(next(lines))
     for method, why in result.failed.items():
         click.echo(f"not run: {method}: {why}")
     for method, found in result.diverged().items():

@@ -213,7 +213,13 @@ def parse_segments(spec: str | None, t: FloatArray) -> dict[str, tuple[float, fl
             raise InvalidParameter("segments", f"length must be positive, got {values[0]}")
         edges = [*np.arange(start, end, values[0]).tolist(), end]
     else:
-        edges = [start, *sorted(v for v in values if start < v < end), end]
+        outside = [v for v in values if not start < v < end]
+        if outside:
+            listed = ", ".join(f"{v:g}" for v in outside)
+            raise InvalidParameter(
+                "segments", f"{listed} s outside the log's clock ({start:.1f}-{end:.1f} s)"
+            )
+        edges = [start, *sorted(values), end]
     return {
         f"{a:.1f}-{b:.1f}s": (float(a), float(b)) for a, b in itertools.pairwise(edges) if b > a
     }

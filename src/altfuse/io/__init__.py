@@ -35,6 +35,10 @@ def read_log(path: str | Path) -> FlightLog:
     path = Path(path)
     if not path.exists():
         raise LogReadError(f"{path}: no such file")
+    if path.is_dir():
+        raise LogReadError(
+            f"{path}: a folder, not a log; for its logs: altfuse batch {path} -o OUT"
+        )
     if not path.is_file():
         raise LogReadError(f"{path}: not a file")
     try:
