@@ -375,3 +375,27 @@ def test_every_command_s_help_gives_its_exit_codes(command: str) -> None:
     assert "2 a usage or parameter error" in text
     if command == "batch":
         assert "4 when some failed" in text
+
+
+def test_o_dash_writes_the_csv_to_standard_output(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 19: ``-o -`` is standard output (the CSV), not a file named "-"; the sidecar goes
+    where --meta says, or nowhere, with a warning; the summary line goes to stderr."""
+    monkeypatch.chdir(tmp_path)
+    piped = run("fuse", SAMPLE_LOG, "-o", "-")
+    assert piped.exit_code == 0, piped.output
+    table = pd.read_csv(io.StringIO(piped.stdout))
+    assert len(table) == 1200
+    assert table.columns[0] == "time_s"
+    assert "without its provenance (--meta names a file)" in piped.stderr
+    assert "standard output: 1200 rows" in piped.stderr
+    assert list(tmp_path.iterdir()) == []  # no file "-", no sidecar
+    kept = run("fuse", SAMPLE_LOG, "-o", "-", "--meta", "m.json")
+    assert kept.exit_code == 0
+    assert "without its provenance" not in kept.stderr
+    assert json.loads((tmp_path / "m.json").read_text())["outputs"] == {
+        "csv": "-",
+        "meta": "m.json",
+    }
+    assert kept.stdout == piped.stdout

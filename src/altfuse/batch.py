@@ -247,7 +247,7 @@ def is_complete(job: Job, options: BatchOptions) -> bool:
     """Whether ``job``'s outputs exist, complete, for the input as it is now and these options."""
     outputs = job.outputs(options)
     meta = outputs.meta_path
-    if not all(p.exists() for p in outputs.paths()):
+    if meta is None or not all(p.exists() for p in outputs.paths()):
         return False
     try:
         record = json.loads(meta.read_text(encoding="utf-8"))

@@ -40,6 +40,7 @@ from altfuse.pipeline import FuseOptions
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
 from altfuse.write import (
+    STDOUT,
     TableFormat,
     atomic_outputs,
     check_paths,
@@ -244,7 +245,7 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
 @_LOG_ARG
 @_output_option(
     "The fused table to write: CSV, or Parquet for a .parquet name; the provenance goes beside "
-    "it as NAME.meta.json."
+    "it as NAME.meta.json. '-': the CSV to standard output."
 )
 @_pipeline_options
 @click.option(
@@ -289,6 +290,11 @@ def fuse(
     opts = FuseOptions(method=method, params=params, **options)
     outputs = Outputs(output, meta_path, weights_path, plot_path)
     outputs.refuse(log, force)
+    if outputs.meta_path is None:
+        logging.getLogger("altfuse").warning(
+            "%s: the table goes to standard output, without its provenance (--meta names a file)",
+            log.name,
+        )
     with _progress_line():
         done = fuse_to_files(log, outputs, opts)
     run = done.run
@@ -305,11 +311,13 @@ def fuse(
             log.name, method, record["diverged_ticks"], record["max_excursion_m"], lost,
         )  # fmt: skip
     counts = run.provenance["status_counts"]
+    sidecar = done.written.get("meta", "none")
     click.echo(
-        f"{output}: {run.referred.t.size} rows, method {method}, "
-        f"sensors {', '.join(run.referred.names)}; "
+        f"{'standard output' if output == STDOUT else output}: {run.referred.t.size} rows, "
+        f"method {method}, sensors {', '.join(run.referred.names)}; "
         + ", ".join(f"{k} {v}" for k, v in counts.items())
-        + f" (provenance: {done.written['meta']})"
+        + f" (provenance: {sidecar})",
+        err=output == STDOUT,  # the table itself is on standard output
     )
 
 

@@ -15,6 +15,7 @@ from altfuse.params import fields
 from altfuse.pipeline import FuseOptions, FuseRun, fuse_log, prepare_log, progress, run_method
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.write import (
+    STDOUT,
     Writer,
     check_paths,
     default_meta_path,
@@ -47,13 +48,14 @@ class Outputs:
             check_plot_path(self.plot)
 
     @property
-    def meta_path(self) -> Path:
+    def meta_path(self) -> Path | None:
+        """The sidecar's path: ``meta``, else beside the table (none beside standard output)."""
         return self.meta or default_meta_path(self.csv)
 
     def paths(self) -> list[Path]:
-        """Every file this run writes."""
-        optional = (self.weights, self.plot, self.evaluation)
-        return [self.csv, self.meta_path, *(p for p in optional if p is not None)]
+        """Every file this run writes (not standard output)."""
+        optional = (self.csv, self.meta_path, self.weights, self.plot, self.evaluation)
+        return [p for p in optional if p is not None and p != STDOUT]
 
     def refuse(self, log_path: Path, force: bool = False) -> None:
         """Refuse outputs that would overwrite the input log or each other, or existing files

@@ -15,6 +15,7 @@ import glob
 import json
 import os
 import socket
+import sys
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -142,9 +143,13 @@ def weights_table(run: FuseRun) -> pd.DataFrame:
     return table
 
 
-def default_meta_path(csv_path: Path) -> Path:
-    """``out.csv`` -> ``out.meta.json``."""
-    return csv_path.with_suffix(".meta.json")
+#: ``-o -``: the fused table (CSV) goes to standard output.
+STDOUT = Path("-")
+
+
+def default_meta_path(csv_path: Path) -> Path | None:
+    """``out.csv`` -> ``out.meta.json``; none beside standard output."""
+    return None if csv_path == STDOUT else csv_path.with_suffix(".meta.json")
 
 
 Writer = Callable[[IO[Any]], None]
@@ -328,24 +333,38 @@ def write_outputs(
 ) -> dict[str, str]:
     """Write the CSV, the optional weight traces and ``extra`` files (path: (writer, binary)),
     then the provenance sidecar, all or none. The sidecar is renamed into place last: a sidecar
-    whose listed outputs all exist marks a complete set. Returns the files written, by role."""
+    whose listed outputs all exist marks a complete set. Returns the files written, by role.
+
+    A ``csv_path`` of ``-`` (:data:`STDOUT`) writes the CSV to standard output once the files
+    are in place, and the sidecar only where ``meta_path`` names one."""
     csv_path = Path(csv_path)
     meta = Path(meta_path) if meta_path else default_meta_path(csv_path)
-    outputs = {table_format(csv_path): csv_path, "meta": meta}
+    outputs: dict[str, Path] = {table_format(csv_path): csv_path}
+    if meta is not None:
+        outputs["meta"] = meta
     if weights_path:
         outputs["weights"] = Path(weights_path)
     for path in extra or {}:
         outputs[path.suffix.lstrip(".") or path.name] = path
     # the sidecar names its siblings relative to itself: the same bytes wherever they are written
-    listed = {role: os.path.relpath(path, meta.parent) for role, path in outputs.items()}
+    here = Path.cwd() if meta is None else meta.parent
+    listed = {
+        role: str(path) if path == STDOUT else os.path.relpath(path, here)
+        for role, path in outputs.items()
+    }
     provenance = dict(run.provenance, outputs=listed)
+    fused = write_table(fused_table(run), table_format(csv_path), provenance)
     with atomic_outputs() as stage:
-        fused = write_table(fused_table(run), table_format(csv_path), provenance)
-        stage(csv_path, fused, binary=True)
+        if csv_path != STDOUT:
+            stage(csv_path, fused, binary=True)
         if weights_path:
             weights = Path(weights_path)
             stage(weights, write_table(weights_table(run), table_format(weights), provenance), True)
         for path, (write, binary) in (extra or {}).items():
             stage(path, write, binary)
-        stage(meta, write_json(provenance))
+        if meta is not None:
+            stage(meta, write_json(provenance))
+    if csv_path == STDOUT:
+        fused(sys.stdout.buffer)
+        sys.stdout.flush()
     return {role: str(path) for role, path in outputs.items()}
