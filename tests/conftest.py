@@ -22,7 +22,12 @@ def shared_log(relative: str) -> Path:
     ``ALTFUSE_REQUIRE_SHARED_LOGS=1``."""
     path = SHARED_LOGS / relative
     if not path.exists():
-        message = f"{path} not found (the real logs live in ../shared/logs)"
+        message = (
+            f"needs the real logs in ../shared/logs, beside the clone (no folder {SHARED_LOGS}; "
+            "README: Setup)"
+            if not SHARED_LOGS.is_dir()
+            else f"{relative} not found in {SHARED_LOGS}"
+        )
         if os.environ.get("ALTFUSE_REQUIRE_SHARED_LOGS") == "1":
             pytest.fail(message)
         pytest.skip(message)
