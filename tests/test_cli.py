@@ -130,7 +130,7 @@ def test_bad_files(tmp_path: Path, case: str, fragment: str) -> None:
         (["--min-sensors", "0"], "--min-sensors must be a whole number >= 1, got 0"),
         (["--method", "mean", "--beta", "3"], "--beta does not apply to method 'mean'"),
         (["--method", "delay1", "--time-constant", "1"], "--time-constant does not apply"),
-        (["--method", "delay1", "--q", "-1"], "--q must be a number >= 0, got -1.0"),
+        (["--method", "delay1", "--q", "-1"], "--process-noise must be a number >= 0, got -1.0"),
         (["--method", "delay2", "--form", "exact"], "'exact' is not one of"),
         (["--method", "multilayer", "--time-constant", "0"], "--time-constant"),
         (["--method", "multilayer", "--e-max", "-1"], "--e-max"),

@@ -126,7 +126,7 @@ def test_method_parameters_pass_through_evaluate(tmp_path: Path) -> None:
     assert reports[2]["mean"] == reports[0]["mean"]  # alpha is support's alone
     refused = CliRunner().invoke(cli, ["evaluate", str(PAPER_A), "--methods", "mean", "--q", "1"])
     assert refused.exit_code == 2
-    assert "--q does not apply to method 'mean'" in refused.stderr
+    assert "--process-noise does not apply to method 'mean'" in refused.stderr  # --q: its alias
 
 
 def test_method_that_cannot_run_is_listed() -> None:

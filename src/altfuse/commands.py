@@ -139,7 +139,19 @@ def _option_spec(
     attrs: dict[str, Any] = {"type": kind, "multiple": repeats, "help": help_text}
     if defaults:
         attrs.update(default=() if repeats else f.default, show_default=True)
-    return [flag_of(f), f.name], attrs
+    return [flag_of(f), *f.metadata.get("aliases", ()), f.name], attrs
+
+
+class _Option(click.Option):
+    """An option whose help shows its first flag only: the others are older names, still
+    taken (``--q`` for ``--process-noise``)."""
+
+    def get_help_record(self, ctx: click.Context) -> tuple[str, str] | None:
+        shown, self.opts = self.opts, self.opts[:1]
+        try:
+            return super().get_help_record(ctx)
+        finally:
+            self.opts = shown
 
 
 def _method_parameter_options() -> list[click.Option]:
@@ -150,7 +162,7 @@ def _method_parameter_options() -> list[click.Option]:
         types = hints(method.params)
         for f in fields(method.params):
             users.setdefault(f.name, []).append((name, f, types[f.name]))
-    options = []
+    options: list[click.Option] = []
     for field_name, used in users.items():
         _, first, hint = used[0]
         if any(h != hint or unit_of(f) != unit_of(first) for _, f, h in used):
@@ -165,7 +177,7 @@ def _method_parameter_options() -> list[click.Option]:
         decls, attrs = _option_spec(first, hint, "; ".join(said) + ".", defaults=False)
         if attrs["multiple"]:
             attrs["help"] += " Repeatable."
-        options.append(click.Option(decls, **attrs))
+        options.append(_Option(decls, **attrs))
     return options
 
 

@@ -49,7 +49,7 @@ class InvalidParameter(ParameterError):
         self.problem = problem
 
 
-def param(
+def param(  # noqa: PLR0913 (keyword-only: a field's metadata, by name)
     default: Any,
     *,
     help: str,
@@ -57,16 +57,22 @@ def param(
     check: Check = "any",
     maximum: float = math.inf,
     default_text: str | None = None,
+    flag: str | None = None,
+    aliases: tuple[str, ...] = (),
 ) -> Any:
     """A dataclass field with its metadata: ``help``, ``unit`` (its name ends in the unit's
-    suffix), ``check`` and ``maximum`` on numbers, and ``default_text`` for a default chosen at
-    run time (a ``None`` default: "from the data"). A mapping default is copied per instance."""
+    suffix), ``check`` and ``maximum`` on numbers, ``default_text`` for a default chosen at
+    run time (a ``None`` default: "from the data"), and the command line's ``flag`` where the
+    name does not make one that says what it is, with older ``aliases`` still taken (not shown).
+    A mapping default is copied per instance."""
     metadata = {
         "help": help,
         "unit": unit,
         "check": check,
         "maximum": maximum,
         "default_text": default_text,
+        "flag": flag,
+        "aliases": aliases,
     }
     if isinstance(default, Mapping):
         return dataclasses.field(default_factory=lambda: dict(default), metadata=metadata)
@@ -83,8 +89,10 @@ def unit_of(f: dataclasses.Field[Any]) -> str:
 
 
 def flag_of(f: dataclasses.Field[Any]) -> str:
-    """The command line's flag of a field: its name less the unit's suffix
+    """The command line's flag of a field: its ``flag``, else its name less the unit's suffix
     (``time_constant_s`` -> ``--time-constant``)."""
+    if f.metadata.get("flag"):
+        return str(f.metadata["flag"])
     stem = f.name.removesuffix(UNIT_SUFFIXES[unit_of(f)]) if unit_of(f) else f.name
     return "--" + stem.replace("_", "-")
 

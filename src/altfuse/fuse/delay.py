@@ -88,6 +88,8 @@ def process_noise(default_m2_s: float) -> Any:
         help="process noise of the practical form, a random walk's density",
         unit="m^2/s",
         check="non-negative",
+        flag="--process-noise",
+        aliases=("--q",),
     )
 
 
