@@ -110,12 +110,23 @@ class Evaluation:
         return out
 
 
+#: A reference is not interpolated across a pause in its samples longer than this [s], or five
+#: of its sampling intervals (a log's pause: drawn and scored straight across 628 s before).
+REFERENCE_MAX_GAP_S = 1.0
+
+
 def _on_clock(series: Series, referred: Referred) -> FloatArray:
-    """``series`` on the clock (linear, no extrapolation), referred over the ground window."""
+    """``series`` on the clock (linear, no extrapolation, no bridging of a pause in it),
+    referred over the ground window."""
     t = referred.t
-    inside = (t >= series.t[0]) & (t <= series.t[-1])
     order = np.argsort(series.t, kind="stable")
-    h = np.where(inside, np.interp(t, series.t[order], series.value[order]), np.nan)
+    ts, values = series.t[order], series.value[order]
+    inside = (t >= ts[0]) & (t <= ts[-1])
+    if ts.size > 1:
+        longest = max(REFERENCE_MAX_GAP_S, 5 * float(np.median(np.diff(ts))))
+        after = np.clip(np.searchsorted(ts, t), 1, ts.size - 1)
+        inside &= ts[after] - ts[after - 1] <= longest
+    h = np.where(inside, np.interp(t, ts, values), np.nan)
     lo, hi = referred.ground_window_s
     ground = (t >= lo) & (t <= hi) & np.isfinite(h)
     if not ground.any():
