@@ -83,7 +83,10 @@ rejected, counted per sensor and traced. When no sample of any sensor has passed
 ``LOCKOUT_S`` (2 s), the estimate, not every sensor, has gone astray: the height's and the
 velocity's variances grow by what the next sample says, which then passes (ArduPilot's EKF3
 resets its height after 5 s). Without it one bad stretch locked every later sample out (a
-simulator's log: 47 s and 706 of 706 samples rejected, 415 m below the ground). At 5 sigma,
+simulator's log: 47 s and 706 of 706 samples rejected, 415 m below the ground). Where two
+sensors fail the gate on the same side, they agree against the estimate: it is let loose after
+``AGREED_LOCKOUT_S`` (0.5 s; a PX4 simulator's landing that the logged IMU did not show left it
+1.4 m under GPS and barometer for 2.5 s, 0.46 m for 0.6 s since). At 5 sigma,
 Paper A's barometer excursion was accepted long enough to bend the barometer's temperature
 coefficient (0.24 m/degC against 0.12), and every height after the rangefinder was lost with it
 (0.73 m RMSE against 0.17 m at 3.5 sigma).
