@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from altfuse.cli import cli
 from conftest import ROOT, SHARED_LOGS, shared_log
 from fuzz_long import judge
-from fuzzing import MUTATIONS, Records, variant
+from fuzzing import MUTATIONS, Records, duplicate_block, flip_bytes, truncate, variant, zero_block
 
 BASES = [ROOT / "sample_logs" / "paper_a.bin"] + [
     p
@@ -88,3 +88,40 @@ def test_variants_the_long_run_found(name: str, names: list[str], seed: int, met
             sorted(p.name for p in Path(tmp).iterdir()),
         )
         assert not kind.startswith("FAIL"), (kind, detail)
+
+
+#: PX4 ULogs (issue 18) under the mutations that need no DataFlash structure.
+ULOG_BASES = ("px4ulogrs_esc_status_log.ulg", "px4_sitl_yuneec_position.ulg",
+              "pyulog_sample_px4_events.ulg")  # fmt: skip
+BYTE_MUTATIONS = {"truncate": truncate, "flip": flip_bytes, "zero": zero_block,
+                  "duplicate": duplicate_block}  # fmt: skip
+
+
+@settings(
+    max_examples=30, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
+@given(
+    which=st.sampled_from(ULOG_BASES),
+    names=st.lists(st.sampled_from(sorted(BYTE_MUTATIONS)), min_size=1, max_size=3),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_damaged_ulogs_never_crash(which: str, names: list[str], seed: int) -> None:
+    """Found so: a flipped byte in a parameter's or a field's format made pyulog decode text
+    where a number was (a ValueError, exit 3)."""
+    import numpy as np
+
+    data = shared_log(f"px4/{which}").read_bytes()
+    rng = np.random.default_rng(seed)
+    for name in names:
+        data = BYTE_MUTATIONS[name](data, rng, None)  # type: ignore[arg-type]
+    with tempfile.TemporaryDirectory() as tmp:
+        log, out = Path(tmp) / "damaged.bin", Path(tmp) / "out.csv"
+        log.write_bytes(data)
+        result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out)])
+        kind, detail = judge(
+            result.exit_code,
+            result.stderr.strip().splitlines(),
+            out,
+            sorted(p.name for p in Path(tmp).iterdir()),
+        )
+        assert not kind.startswith("FAIL"), (names, seed, kind, detail)

@@ -124,12 +124,21 @@ def read_ulog(path: str | Path) -> FlightLog:
         )
     counts: dict[str, int] = {}
     for d in sorted(ulog.data_list, key=lambda d: (d.name, d.multi_id)):
-        topics.instances.setdefault(d.name, []).append(d.data)
+        # a damaged format can type a field as text: only numbers are read
+        numbers = {k: v for k, v in d.data.items() if v.dtype.kind in "biuf"}
+        if "timestamp" not in numbers:
+            notes.append(f"{d.name}[{d.multi_id}]: no numeric timestamp, not read")
+            continue
+        topics.instances.setdefault(d.name, []).append(numbers)
         counts[f"{d.name}[{d.multi_id}]"] = int(d.data["timestamp"].size)
     if ulog.dropouts:
         lost = sum(d.duration for d in ulog.dropouts) / 1e3
         notes.append(f"{len(ulog.dropouts)} logging dropouts, {lost:.1f} s in all")
-    params = {k: float(v) for k, v in ulog.initial_parameters.items()}
+    params = {  # a damaged parameter decodes as bytes
+        k: float(v)
+        for k, v in ulog.initial_parameters.items()
+        if isinstance(v, int | float) and not isinstance(v, bool)
+    }
     sensors = _Sensors()
     _read_gps(topics, sensors)
     _read_baro(topics, sensors)
