@@ -8,6 +8,7 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from click.testing import CliRunner
@@ -77,17 +78,23 @@ def test_variants_the_long_run_found(name: str, names: list[str], seed: int, met
     if not path.exists():
         path = shared_log(f"ardupilot/{name}")
     data, records = base(path)
+    kind, detail = fused_and_judged(variant(data, records, names, seed), "-m", method)
+    assert not kind.startswith("FAIL"), (kind, detail)
+
+
+def fused_and_judged(data: bytes, *args: str) -> tuple[str, str]:
+    """``altfuse fuse`` on a damaged log's bytes (with ``args``), judged as the long run
+    judges it (``fuzz_long.judge``)."""
     with tempfile.TemporaryDirectory() as tmp:
         log, out = Path(tmp) / "damaged.bin", Path(tmp) / "out.csv"
-        log.write_bytes(variant(data, records, names, seed))
-        result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), "-m", method])
-        kind, detail = judge(
+        log.write_bytes(data)
+        result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), *args])
+        return judge(
             result.exit_code,
             result.stderr.strip().splitlines(),
             out,
             sorted(p.name for p in Path(tmp).iterdir()),
         )
-        assert not kind.startswith("FAIL"), (kind, detail)
 
 
 #: PX4 ULogs (issue 18) under the mutations that need no DataFlash structure.
@@ -108,20 +115,9 @@ BYTE_MUTATIONS = {"truncate": truncate, "flip": flip_bytes, "zero": zero_block,
 def test_damaged_ulogs_never_crash(which: str, names: list[str], seed: int) -> None:
     """Found so: a flipped byte in a parameter's or a field's format made pyulog decode text
     where a number was (a ValueError, exit 3)."""
-    import numpy as np
-
     data = shared_log(f"px4/{which}").read_bytes()
     rng = np.random.default_rng(seed)
     for name in names:
         data = BYTE_MUTATIONS[name](data, rng, None)  # type: ignore[arg-type]
-    with tempfile.TemporaryDirectory() as tmp:
-        log, out = Path(tmp) / "damaged.bin", Path(tmp) / "out.csv"
-        log.write_bytes(data)
-        result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out)])
-        kind, detail = judge(
-            result.exit_code,
-            result.stderr.strip().splitlines(),
-            out,
-            sorted(p.name for p in Path(tmp).iterdir()),
-        )
-        assert not kind.startswith("FAIL"), (names, seed, kind, detail)
+    kind, detail = fused_and_judged(data)
+    assert not kind.startswith("FAIL"), (names, seed, kind, detail)
