@@ -79,6 +79,29 @@ class Series:
         )
 
 
+def usable_series(
+    name: str,
+    kind: SensorKind,
+    source: str,
+    datum: str,
+    samples: Samples,
+    invalid: dict[str, npt.NDArray[np.bool_]],
+) -> Series | str:
+    """A reader's altitude source: ``samples`` less those not finite and those in each
+    ``invalid`` mask (counted by reason in ``dropped``); or, where none is left, why."""
+    t, value = samples
+    keep = np.isfinite(t) & np.isfinite(value)
+    dropped = {"not a finite number": int((~keep).sum())} if (~keep).any() else {}
+    for reason, mask in invalid.items():
+        if (hit := keep & mask).any():
+            dropped[reason] = int(hit.sum())
+        keep &= ~mask
+    if not keep.any():
+        detail = ", ".join(f"{n} {r}" for r, n in dropped.items()) or "no records"
+        return f"{source}: no usable sample ({detail})"
+    return Series(name, kind, source, datum, t[keep], value[keep], dropped)
+
+
 @dataclass(frozen=True)
 class Imu:
     """Specific force in the body frame (FRD) [m/s²] of the first IMU."""

@@ -50,10 +50,12 @@ from altfuse.model import (
     FlightLog,
     FloatArray,
     Imu,
+    Samples,
     SensorKind,
     Series,
     SeriesKind,
     Vibration,
+    usable_series,
 )
 
 log = logging.getLogger(__name__)
@@ -297,30 +299,15 @@ class _Builder:
         if unit not in _LENGTH_UNITS_OK:
             self.dropped_sources[name] = f"{source} is in {unit!r}, not metres"
             return
-        t = self.rec.times(type_name)[select]
-        value = self.rec.column(type_name, col)[select]
-        keep = np.isfinite(t) & np.isfinite(value)
-        dropped: dict[str, int] = {}
-        if (~keep).any():
-            dropped["not a finite number"] = int((~keep).sum())
-        for reason, mask in (invalid or {}).items():
-            hit = keep & mask[select]
-            if hit.any():
-                dropped[reason] = int(hit.sum())
-            keep &= ~mask[select]
-        if not keep.any():
-            detail = ", ".join(f"{n} {r}" for r, n in dropped.items()) or "no records"
-            self.dropped_sources[name] = f"{source}: no usable sample ({detail})"
-            return
-        self.sensors[name] = Series(
-            name=name,
-            kind=kind,
-            source=source,
-            datum=datum,
-            t=t[keep],
-            value=value[keep],
-            dropped=dropped,
+        samples = Samples(
+            self.rec.times(type_name)[select], self.rec.column(type_name, col)[select]
         )
+        masks = {reason: mask[select] for reason, mask in (invalid or {}).items()}
+        found = usable_series(name, kind, source, datum, samples, masks)
+        if isinstance(found, str):
+            self.dropped_sources[name] = found
+        else:
+            self.sensors[name] = found
 
 
 def _add_instances(  # noqa: PLR0913 (what each instance's source is, as add() takes it)

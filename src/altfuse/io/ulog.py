@@ -43,7 +43,16 @@ from typing import Any
 import numpy as np
 
 from altfuse.errors import LogReadError
-from altfuse.model import Attitude, FlightLog, FloatArray, Imu, SensorKind, Series
+from altfuse.model import (
+    Attitude,
+    FlightLog,
+    FloatArray,
+    Imu,
+    Samples,
+    SensorKind,
+    Series,
+    usable_series,
+)
 from altfuse.screen import MAX_BOOT_S
 
 #: The topics read (pyulog parses no other).
@@ -203,17 +212,11 @@ class _Sensors:
         value: FloatArray,
         invalid: dict[str, np.ndarray],
     ) -> None:
-        keep = np.isfinite(t) & np.isfinite(value)
-        dropped = {"not a finite number": int((~keep).sum())} if (~keep).any() else {}
-        for reason, mask in invalid.items():
-            if (hit := keep & mask).any():
-                dropped[reason] = int(hit.sum())
-            keep &= ~mask
-        if not keep.any():
-            detail = ", ".join(f"{n} {r}" for r, n in dropped.items()) or "no samples"
-            self.dropped[name] = f"{source}: no usable sample ({detail})"
-            return
-        self.found.append(Series(name, kind, source, datum, t[keep], value[keep], dropped))
+        found = usable_series(name, kind, source, datum, Samples(t, value), invalid)
+        if isinstance(found, str):
+            self.dropped[name] = found
+        else:
+            self.found.append(found)
 
 
 def _names(kind: str) -> Iterator[str]:
