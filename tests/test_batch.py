@@ -64,6 +64,10 @@ def test_batch_over_the_shared_logs_refuses_the_unfusable_and_exits_0(tmp_path: 
     assert "water depth" in refused["ardusubtools_small.BIN"]
     assert "no usable altitude source" in refused["hatemslah_demo-flight.bin"]
     assert "1 usable altitude source (gps)" in refused["pfcFlightData_center_0003.bin"]
+    # what the log is, though it was refused
+    described = summary[summary.status == "refused"].set_index("log")
+    assert described.loc["ardusubtools_small.BIN", "firmware"] == "ArduSub V4.1.0"
+    assert described.loc["pfcFlightData_center_0003.bin", "vehicle"] == "plane"
     ok = summary[summary.status == "ok"].set_index("log")
     assert len(ok) == 8
     assert (ok.samples > 0).all()

@@ -40,13 +40,7 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from altfuse import __version__
-from altfuse.errors import (
-    AltfuseError,
-    LogReadError,
-    NoUsableSensorsError,
-    ParameterError,
-    UnsupportedLogError,
-)
+from altfuse.errors import AltfuseError, LogReadError, ParameterError, Refusal
 from altfuse.io import sha256_of
 from altfuse.job import FileRun, Outputs, fuse_to_files
 from altfuse.params import InvalidParameter
@@ -75,8 +69,6 @@ PlotFormat = Literal["png", "svg"]
 #: ``refused``: the log is valid but not fusable (too few altitude sources, an ArduSub depth
 #: log), not a failure; ``failed``: an error (unreadable, damaged, an output in the way, a bug).
 Outcome = Literal["ok", "refused", "skipped", "failed"]
-#: Errors that refuse a log rather than fail it.
-REFUSALS = (NoUsableSensorsError, UnsupportedLogError)
 
 
 @dataclass(frozen=True)
@@ -275,8 +267,10 @@ def process(job: Job, options: BatchOptions) -> LogResult:
     try:
         done = fuse_to_files(job.log, outputs, options.fuse, label=str(job.relative))
         return _described(name, done, time.perf_counter() - started)
-    except REFUSALS as exc:
-        return LogResult(name, "refused", str(exc), processing_s=time.perf_counter() - started)
+    except Refusal as exc:
+        seconds = time.perf_counter() - started
+        return LogResult(name, "refused", str(exc), processing_s=seconds, vehicle=exc.vehicle,
+                         firmware=exc.firmware)  # fmt: skip
     except AltfuseError as exc:
         return LogResult(name, "failed", str(exc), processing_s=time.perf_counter() - started)
     except Exception as exc:  # a bug must not stop the batch either; the row names it

@@ -11,11 +11,19 @@ class LogReadError(AltfuseError):
     """The file cannot be read as a flight log (missing, empty, not a log, cut before any data)."""
 
 
-class NoUsableSensorsError(AltfuseError):
+class Refusal(AltfuseError):
+    """The log is valid but cannot be fused: a refusal, not a failure (a batch's ``refused``).
+    What the log is, where it was read before the refusal: its vehicle and firmware."""
+
+    vehicle = ""
+    firmware = ""
+
+
+class NoUsableSensorsError(Refusal):
     """The log holds too few altitude sources for the job."""
 
 
-class UnsupportedLogError(AltfuseError):
+class UnsupportedLogError(Refusal):
     """The log is readable but its content is outside what altfuse fuses (e.g. ArduSub depth)."""
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from altfuse import __version__
 from altfuse.align import Aligned, Lag, Span, align, gps_lags, shift, splices
 from altfuse.datum import Referral, Referred, refer_to_takeoff, referred_samples, tilt_correct
-from altfuse.errors import NoUsableSensorsError, ParameterError, UnsupportedLogError
+from altfuse.errors import NoUsableSensorsError, ParameterError, Refusal, UnsupportedLogError
 from altfuse.fuse import DEFAULT_METHOD, METHODS, FusionInput, FusionResult, Method, method
 from altfuse.guard import guard
 from altfuse.inertial import referred_vertical_acceleration
@@ -122,7 +122,16 @@ class Prepared:
 
 
 def prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
-    """Screen, tilt-correct, align and refer the altitude sources of ``flight`` to take-off."""
+    """Screen, tilt-correct, align and refer the altitude sources of ``flight`` to take-off.
+    A :class:`Refusal` raised on the way says the log's vehicle and firmware."""
+    try:
+        return _prepare(flight, options)
+    except Refusal as exc:
+        exc.vehicle, exc.firmware = flight.vehicle, flight.firmware
+        raise
+
+
+def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     name = Path(flight.path).name
     if flight.vehicle == "sub":
         raise UnsupportedLogError(
