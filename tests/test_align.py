@@ -149,3 +149,18 @@ def test_a_pause_in_every_sensor_and_the_accelerometer_splits_the_log() -> None:
     assert splices(aligned, imu_through) == []  # the accelerometer saw the pause: one flight
     imu_paused = imu_through[(imu_through < 50.0) | (imu_through >= 70.0)]
     assert splices(aligned, imu_paused) == [pytest.approx(70.0)]
+
+
+def test_a_sensor_logged_slower_than_the_gap_is_not_cut_between_its_samples() -> None:
+    """A GPS at 1 Hz (a PX4 low-rate logging profile) with the default max_gap of 1 s: its
+    jittered intervals (1.000-1.004 s) are its sampling, not gaps; a 3 s pause still is one."""
+    rng = np.random.default_rng(2)
+    t = np.cumsum(1.0 + rng.uniform(0.0, 0.004, 40))
+    t = np.delete(t, [20, 21])  # a pause of 3 s
+    v = np.sin(t / 5)
+    grid = np.arange(np.ceil(t[0] * 10), np.floor(t[-1] * 10) + 1) / 10
+    out, stats = resample(t, v, grid, 10.0, 1.0)
+    pause = (grid > t[19] + 1e-6) & (grid < t[20] - 1e-6)
+    assert np.isnan(out[pause]).all()
+    assert np.isfinite(out[~pause]).all()
+    assert stats.gaps_over_max == 1

@@ -10,8 +10,9 @@ module decides (ALGORITHMS.md section 1):
 - A sensor faster than the clock is first averaged into the cell of width ``1 / rate_hz`` around
   each tick (a box filter), and the spline is fitted through the cell means: a spline through
   every raw sample would alias the noise into the decimated series.
-- The spline never bridges a gap longer than ``max_gap_s`` and never extrapolates: ticks in a gap
-  or outside a sensor's data are NaN for that sensor, not invented.
+- The spline never bridges a gap longer than ``max_gap_s`` (or, for a sensor logged more slowly,
+  ``OWN_INTERVALS`` of its own sampling interval) and never extrapolates: ticks in a gap or
+  outside a sensor's data are NaN for that sensor, not invented.
 - The clock spans the union of the sensors' time ranges (NaN marks absence) or their overlap.
 """
 
@@ -101,6 +102,11 @@ def cell_means(t: FloatArray, v: FloatArray, rate_hz: float) -> tuple[FloatArray
     return np.add.reduceat(t, starts) / counts, np.add.reduceat(v, starts) / counts
 
 
+#: A sensor's own sampling interval times this is never a gap: a GPS logged at 1 Hz (a PX4
+#: low-rate logging profile) fell apart between every two samples at ``max_gap_s`` 1.0.
+OWN_INTERVALS = 1.5
+
+
 def resample(
     t: FloatArray, v: FloatArray, grid: FloatArray, rate_hz: float, max_gap_s: float
 ) -> tuple[FloatArray, AlignStats]:
@@ -111,6 +117,8 @@ def resample(
     n_unique = t.size
     t, v = cell_means(t, v, rate_hz)
     out = np.full(grid.shape, np.nan)
+    if t.size > 1:
+        max_gap_s = max(max_gap_s, OWN_INTERVALS * float(np.median(np.diff(t))))
     breaks = np.flatnonzero(np.diff(t) > max_gap_s) + 1
     segments = np.split(np.arange(t.size), breaks)
     half_cell = 0.5 / rate_hz

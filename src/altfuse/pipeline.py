@@ -43,7 +43,8 @@ class FuseOptions:
     )
     max_gap_s: float = param(
         1.0,
-        help="longest gap in a sensor's data the spline may bridge",
+        help="longest gap in a sensor's data the spline may bridge (at least 1.5 of its own "
+        "sampling interval)",
         unit="s",
         check="positive",
     )
