@@ -62,8 +62,10 @@ def test_a_gross_excursion_is_flagged_however_brief() -> None:
     assert below.record["diverged_ticks"] == 0
 
 
-LOGS = [f"ardupilot/{p.name}" for p in sorted((SHARED_LOGS / "ardupilot").glob("*"))] + [
-    f"truth/{p.name}" for p in sorted((SHARED_LOGS / "truth").glob("*"))
+LOGS = [
+    f"{folder}/{p.name}"
+    for folder in ("ardupilot", "truth", "px4")
+    for p in sorted((SHARED_LOGS / folder).glob("*"))
 ]
 
 
