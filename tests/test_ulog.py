@@ -18,6 +18,7 @@ from altfuse.evaluation import evaluate
 from altfuse.io import read_log
 from altfuse.io.ulog import TOPICS, pressure_altitude
 from altfuse.model import Attitude, Series
+from altfuse.pipeline import fuse_log
 from conftest import SAMPLE_LOG, shared_log
 
 #: Every ULog in ../shared/logs/px4 and what ``altfuse fuse`` makes of it: ok (with the warning
@@ -206,3 +207,13 @@ def test_a_truncated_or_broken_ulog_is_one_line(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["fuse", str(half), "-o", str(tmp_path / "half.csv")])
     assert result.exit_code == 0, result.output  # read up to the cut
     assert half.read_bytes() == source[: len(source) // 2]  # the input untouched
+
+
+def test_a_log_with_no_take_off_knows_its_datum() -> None:
+    """A PX4 simulator log standing on the ground (no take-off: referred to its first seconds)
+    had fused_std 0.70 m for errors of 1 cm: the offsets took the 1 m prior of a datum the
+    flight says nothing about, where the datum is defined on those seconds."""
+    run = fuse_log(shared_log("px4/px4ulogrs_6ba1abc7-b433-4029-b8f5-3b2bb12d3b6c.ulg"))
+    assert "no take-off found" in run.referred.offsets[0].method
+    sigma = run.result.tick_traces["fused_std"]
+    assert 0.005 < np.nanmedian(sigma) < 0.05

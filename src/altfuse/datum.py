@@ -156,11 +156,10 @@ class Referred:
 
     @property
     def datum_windows(self) -> tuple[tuple[float, float] | None, ...]:
-        """Per source, the span over which its offset was measured standing at the take-off
-        point (the ground window before a detected take-off); None where it was not."""
-        return tuple(
-            o.window_s if self.on_real_ground and o.on_ground else None for o in self.offsets
-        )
+        """Per source, the span over which its offset was measured on the datum window (the
+        ground window before a detected take-off, or the log's first seconds, where the datum
+        is defined); None where it was matched to another source instead."""
+        return tuple(o.window_s if o.on_ground else None for o in self.offsets)
 
     @property
     def on_ground_s(self) -> tuple[float, float] | None:

@@ -34,8 +34,9 @@ On the ground before take-off (the datum's ground window, ending ``STILL_MARGIN_
 detected take-off) the vehicle stands at the take-off point: ``h = 0`` and ``v = 0`` there. This
 pins what the sensors alone leave free (all offsets and ``h`` can shift together) and makes
 ``fused_std`` an uncertainty about the height above take-off. A log that starts less than
-``STILL_MARGIN_S`` before take-off has no such span; there each offset measured on the ground
-window has the standard error of that measurement as its prior (:func:`.model.datum_priors`),
+``STILL_MARGIN_S`` before take-off (or none: a log with no take-off is referred to its first
+seconds) has no such span; there each offset measured on that datum window has the standard
+error of that measurement as its prior (:func:`.model.datum_priors`),
 not the 1 m of an offset the flight says nothing about (the 4.5 plane: fused_std 0.58 m, for
 errors of 2-7 cm, coverage 1.00; now 0.027 m, 0.97).
 
