@@ -446,20 +446,19 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
         f"{log.name}: measured against {result.truth.label}, {t.size} ticks "
         f"({t[0]:.1f}-{t[-1]:.1f} s), errors in m"
     )
-    sections = [[r.overall for r in result.rows]]
-    sections += [[r.segments[label] for r in result.rows] for label in result.segments]
+    labels = [None, *result.segments]  # None: over the whole log
     cells = [list(_STATS_HEADER)] + [
-        _stats_cells(row.name, row.kind, stats)
-        for section in sections
-        for row, stats in zip(result.rows, section, strict=True)
+        _stats_cells(r.name, r.kind, r.segments[label] if label else r.overall)
+        for label in labels
+        for r in result.rows
     ]
-    lines = iter(_aligned(cells))
-    click.echo(next(lines))
-    for k, section in enumerate(sections):
-        if k:
-            click.echo(f"segment {list(result.segments)[k - 1]}:")
-        for _ in section:
-            click.echo(next(lines))
+    header, *lines = _aligned(cells)  # one width per column across every section
+    click.echo(header)
+    n = len(result.rows)
+    for k, label in enumerate(labels):
+        if label:
+            click.echo(f"segment {label}:")
+        click.echo("\n".join(lines[k * n : (k + 1) * n]))
     for method, why in result.failed.items():
         click.echo(f"not run: {method}: {why}")
     for method, found in result.diverged().items():

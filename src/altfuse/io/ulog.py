@@ -116,15 +116,15 @@ def read_ulog(path: str | Path) -> FlightLog:
     LogReadError
         pyulog cannot parse the file (a truncated header, not a ULog).
     """
-    from altfuse.io import sha256_of
+    from altfuse.io import hashing
 
     path = Path(path)
-    ulog, printed = _parse(path)
-    notes = [f"pyulog: {line}" for line in printed]
-    damaged = []
-    if ulog.file_corruption:
-        damaged.append("corrupt: pyulog skipped the data it could not parse (read up to the rest)")
-        notes.insert(0, damaged[0])
+    with hashing(path) as digest:
+        ulog, printed = _parse(path)
+        sha256 = digest.result()
+    corrupt = "corrupt: pyulog skipped the data it could not parse (read up to the rest)"
+    damaged: tuple[str, ...] = (corrupt,) if ulog.file_corruption else ()
+    notes = [*damaged, *(f"pyulog: {line}" for line in printed)]
     topics = _Topics()
     if ulog.start_timestamp / 1e6 > MAX_BOOT_S:  # a simulator logging the wall clock
         topics.start_s = ulog.start_timestamp / 1e6
@@ -154,7 +154,7 @@ def read_ulog(path: str | Path) -> FlightLog:
     _read_distance(topics, sensors)
     return FlightLog(
         path=str(path),
-        sha256=sha256_of(path),
+        sha256=sha256,
         size_bytes=path.stat().st_size,
         vehicle=_VEHICLE_OF.get(int(params.get("MAV_TYPE", -1)), "unknown"),
         firmware=_firmware(ulog.msg_info_dict),
@@ -170,7 +170,7 @@ def read_ulog(path: str | Path) -> FlightLog:
         ground_speed=sensors.speed,
         vertical_velocity=sensors.climb,
         temperatures=sensors.temperatures,
-        damaged=tuple(damaged),
+        damaged=damaged,
         reader=f"ULog (pyulog {version('pyulog')})",
     )
 
