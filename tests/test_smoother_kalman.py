@@ -2,9 +2,11 @@
 
 A linear-Gaussian toy with the smoother's own state layout (height, velocity, accelerometer
 bias, two sensor offsets, a barometer's scale error and drift rate), irregular event times, one
-scalar measurement of either sensor per event or none (a clock tick), no gate:
-:func:`passes.run` must give filterpy's ``KalmanFilter.batch_filter`` and ``rts_smoother`` to
-1e-9.
+scalar measurement of either sensor per event or none (a clock tick), the first events on the
+ground (h = 0 and v = 0 held there), no gate: :func:`passes.run` must give filterpy's
+``KalmanFilter.batch_filter`` and ``rts_smoother`` to 1e-9, in the states and in the variances
+it reports (of h at every event, of a sample's own row ``H x``). filterpy's smoother is
+Rauch-Tung-Striebel's, ours the modified Bryson-Frazier form of the same estimate.
 """
 
 from __future__ import annotations
@@ -14,9 +16,12 @@ import pytest
 from filterpy.kalman import KalmanFilter, rts_smoother
 
 from altfuse.fuse.smoother.model import (
+    STILL_SIGMA,
     Events,
     Layout,
     Regressor,
+    couplings,
+    measurement_matrix,
     prior,
     process_noise,
     transition,
@@ -39,6 +44,7 @@ def toy(seed: int, accel: bool) -> tuple[Events, Layout, np.ndarray]:
     a = -3 / 16 * np.sin(t / 4) + rng.normal(0, 0.1, count) if accel else np.zeros(count)
     q_state = np.tile([0.01, 1e-4], (count, 1))
     still = np.zeros(count, dtype=bool)
+    still[:20] = who[:20] == -1  # ticks on the ground
     q_accel = np.full(count, 0.05)
     events = Events(t, who, z, a, q_state, still, q_accel, True, np.inf, float(z[who >= 0][0]))
     scale = Regressor("scale", 1, np.where(who == 1, truth, 0.0), 0.02)
@@ -49,38 +55,60 @@ def toy(seed: int, accel: bool) -> tuple[Events, Layout, np.ndarray]:
 def filterpy_passes(
     ev: Events, layout: Layout, r: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """filterpy's filtered and smoothed means and covariances over the same events."""
+    """filterpy's filtered and smoothed means and covariances over the same events (an event on
+    the ground: its step, then the two holds as steps of their own with no time between)."""
     n, drifts = layout.n, layout.drift_pairs
     dts = np.diff(ev.t, prepend=ev.t[0])
-    qa = ev.q_accel
-    fs, qs = [], []
+    steps = []  # per filterpy step: (event, F, Q, u, H row, z, R)
     for k, dt in enumerate(dts):
         f, q = np.eye(n), np.zeros((n, n))
         transition(f, dt, ev.use_bias, drifts)
-        process_noise(q, dt, qa[k], ev.q_state[k], True, drifts)
-        fs.append(f)
-        qs.append(q)
-    us = [np.array([[0.5 * ev.a[k] * dt * dt], [ev.a[k] * dt]]) for k, dt in enumerate(dts)]
-    bs = [np.vstack([np.eye(2), np.zeros((n - 2, 2))])] * ev.t.size
-    hs = []
-    for k, i in enumerate(ev.who):
+        process_noise(q, dt, ev.q_accel[k], ev.q_state[k], True, drifts)
+        u = np.array([[0.5 * ev.a[k] * dt * dt], [ev.a[k] * dt]])
         row = np.zeros((1, n))
-        row[0, 0] = 1.0
+        i = ev.who[k]
         if i >= 0:
+            row[0, 0] = 1.0
             row[0, 3 + i] = 1.0
         if i == 1:  # the barometer's scale error, times its height
             row[0, 3 + M] = layout.regressors[0].coef[k]
-        hs.append(row)
-    zs = [np.array([z]) if i >= 0 else None for i, z in zip(ev.who, ev.z, strict=True)]
+        steps.append((k, f, q, u, row, np.array([ev.z[k]]) if i >= 0 else None, r[k]))
+        for j in (0, 1) if ev.still[k] else ():
+            hold = np.zeros((1, n))
+            hold[0, j] = 1.0
+            steps.append((k, np.eye(n), np.zeros((n, n)), np.zeros((2, 1)), hold, np.zeros(1),
+                          STILL_SIGMA**2))  # fmt: skip
     kf = KalmanFilter(dim_x=n, dim_z=1, dim_u=2)
     x0, kf.P = prior(ev, layout)
     kf.x = x0.reshape(n, 1)
-    rs = [np.array([[v]]) for v in r]
-    xf, pf, _, _ = kf.batch_filter(zs, Fs=fs, Qs=qs, Hs=hs, Rs=rs, Bs=bs, us=us)
+    fs, qs = [st[1] for st in steps], [st[2] for st in steps]
+    xf, pf, _, _ = kf.batch_filter(
+        [st[5] for st in steps],
+        Fs=fs,
+        Qs=qs,
+        Hs=[st[4] for st in steps],
+        Rs=[np.array([[st[6]]]) for st in steps],
+        Bs=[np.vstack([np.eye(2), np.zeros((n - 2, 2))])] * len(steps),
+        us=[st[3] for st in steps],
+    )
     xf = xf.reshape(-1, n)
     # filterpy's smoother steps k -> k + 1 with Fs[k] and no control input
     xs, ps, _, _ = rts_smoother(xf.copy(), pf.copy(), [*fs[1:], np.eye(n)], [*qs[1:], qs[0]])
-    return xf, pf, xs, ps
+    last = np.array([max(s for s, st in enumerate(steps) if st[0] == k) for k in range(dts.size)])
+    return xf[last], pf[last], xs[last], ps[last]
+
+
+def variances(ev: Events, layout: Layout, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Of covariances ``p`` per event: h's variance, and each sample's row's (NaN at ticks)."""
+    h = measurement_matrix(layout, ev.who)
+    return p[:, 0, 0], np.where(ev.who >= 0, np.einsum("ki,kij,kj->k", h, p, h), np.nan)
+
+
+def assert_matches(ours: dict[str, np.ndarray], ev: Events, layout: Layout, x, p) -> None:  # type: ignore[no-untyped-def]
+    var_h, var_row = variances(ev, layout, p)
+    np.testing.assert_allclose(ours["x"], x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ours["var_h"], var_h, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ours["var_row"], var_row, rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -89,8 +117,8 @@ def test_forward_filter_is_filterpys_kalman_filter(seed: int) -> None:
     ours = run(ev, r, layout, smooth=False)
     xf, pf, _, _ = filterpy_passes(ev, layout, r)
     assert ours["accepted"][ev.who >= 0].all()
-    np.testing.assert_allclose(ours["x"], xf, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(ours["p"], pf, rtol=0, atol=1e-9)
+    assert ev.still.sum() >= 3
+    assert_matches(ours, ev, layout, xf, pf)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -99,8 +127,23 @@ def test_smoother_is_filterpys_rts_smoother(seed: int) -> None:
     ev, layout, r = toy(seed, accel=False)
     ours = run(ev, r, layout)
     _, _, xs, ps = filterpy_passes(ev, layout, r)
-    np.testing.assert_allclose(ours["x"], xs, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(ours["p"], ps, rtol=0, atol=1e-9)
+    assert_matches(ours, ev, layout, xs, ps)
     # and smoothing did something: the first state moved from its filtered value
     filtered = run(ev, r, layout, smooth=False)
     assert np.abs(ours["x"][0] - filtered["x"][0]).max() > 1e-3
+
+
+@pytest.mark.parametrize("use_bias", [True, False])
+@pytest.mark.parametrize("drifting", [(), (1,), (0, 1)])
+def test_the_kernels_know_every_entry_of_f_off_its_diagonal(
+    use_bias: bool, drifting: tuple[int, ...]
+) -> None:
+    # the kernels multiply by F as the identity plus the entries couplings lists: one missing
+    # would be dropped silently
+    layout = Layout(np.ones(M), (), drifting=drifting)
+    drifts = layout.drift_pairs
+    f = np.eye(layout.n)
+    transition(f, 0.37, use_bias, drifts)
+    off = {(int(i), int(k)) for i, k in zip(*np.nonzero(f - np.eye(layout.n)), strict=True)}
+    assert off == {(int(i), int(k)) for i, k in couplings(use_bias, drifts)}
+    assert len(off) == 1 + 2 * use_bias + len(drifting)

@@ -44,7 +44,7 @@ METHODS: dict[str, Method[Any]] = {
 #: simulators' 13 truth logs and altfuse's simulated flights (README, "Accuracy"). The smoother
 #: is the lowest RMSE on 83 of 84 simulated flights, within the project's bar on RMSE and
 #: maximum error on 12 of the truth logs (support: 9), the only method with a fused_std, and
-#: about 3x support's time on a 300 MB log (10.3-10.6 s against 3.5-4.1 s).
+#: 2.2x support's time on a 300 MB log (8.7-9.0 s against 4.0-4.4 s).
 DEFAULT_METHOD = "smoother"
 
 

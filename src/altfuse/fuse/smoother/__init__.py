@@ -1,4 +1,5 @@
-"""Offline Kalman smoother: a forward filter and a Rauch-Tung-Striebel backward pass.
+"""Offline Kalman smoother: a forward filter and a backward pass to the Rauch-Tung-Striebel
+estimate (in the modified Bryson-Frazier form, :mod:`.kalman`).
 
 The papers' methods, like the autopilot's EKF, are causal. Offline, the whole flight is known;
 this method uses it. Beyond the papers (issue 8); textbook references: Rauch, Tung & Striebel,
@@ -110,7 +111,8 @@ error of one sensor unseen, or overstate one). Where GPS and barometer are alone
 excursion, part of it is followed and ``fused_std`` is too small.
 
 Implementation: one module per part. :mod:`.kalman` holds the textbook steps (predict,
-innovation, update, the RTS step; filterpy's symbols, the equations as comments), in place;
+innovation, update, the smoother's adjoint steps; filterpy's symbols, the equations as
+comments), in place;
 :mod:`.model` the state-space model (``F``, ``Q``, ``H``, prior, the ground constraint);
 :mod:`.passes` the forward filter over the events (gate, lockout release) and the backward
 pass, each one loop compiled by numba (:mod:`.compiled`); :mod:`.noise` the noises learnt from
@@ -119,8 +121,9 @@ The passes are checked against filterpy's ``KalmanFilter.batch_filter`` and ``rt
 on a linear-Gaussian toy to 1e-9 (``tests/test_smoother_kalman.py``). filterpy itself is not
 used here: each step carries one scalar measurement of any sensor, or none (a clock tick),
 gated, and the gains per sensor are needed for the contributions. Cost is linear in the
-number of events: 10 us an event on a 1-hour flight with its 400 Hz IMU
-(``benchmarks/smoother_bench.py``), about 3x ``support``'s time on a 300 MB log end to end.
+number of events: 7 us an event over all its passes on a 1-hour flight with its 400 Hz IMU
+(``benchmarks/smoother_bench.py``; 12 us with Rauch-Tung-Striebel's O(n^3) gain), 2.2x
+``support``'s time on a 300 MB log end to end (8.7-9.0 s against 4.0-4.4 s; 3.3x before).
 """
 
 from __future__ import annotations
@@ -186,7 +189,7 @@ class SmootherParams(Params):
 
 
 def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
-    """Kalman filter + RTS smoother over the whole flight (see the module doc).
+    """Kalman filter + fixed-interval smoother over the whole flight (see the module doc).
 
     From ``inputs``: each sensor's own referred ``samples`` (fused at their own times), its
     ``kinds`` and ``names``; ``z`` on the clock marks the ticks where no sensor is valid and gives
@@ -237,11 +240,11 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     for k in range(EM_PASSES):
         progress.info("smoother: noise pass %d of %d (%d events)", k + 1, EM_PASSES, times.size)
         em_scale(ev, layout, noise, out)
-        del out  # its covariances (190 MB a pass on a 300 MB log) go before the next pass's
+        del out  # its states go before the next pass's
         out = run(ev, noise.r(who), layout)
 
     tick = who == -1
-    xs, ps = out["x"][tick], out["p"][tick]
+    xs, var_h = out["x"][tick], out["var_h"][tick]
     weights, valid = contributions(who, out["gain_h"], inputs.z)
     n_valid = np.isfinite(inputs.z).sum(axis=1)
     status = np.where(n_valid == 1, SINGLE, np.where(valid, FUSED, NONE))
@@ -252,7 +255,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         status=status,
         traces={"offset": xs[:, 3 : 3 + m]},
         tick_traces={
-            "fused_std": np.where(valid, np.sqrt(np.maximum(ps[:, 0, 0], 0.0)), np.nan),
+            "fused_std": np.where(valid, np.sqrt(np.maximum(var_h, 0.0)), np.nan),
             "velocity": xs[:, 1],
             "accel_bias": xs[:, 2],
         },

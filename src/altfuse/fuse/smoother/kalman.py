@@ -1,11 +1,26 @@
-"""The textbook steps of a linear Kalman filter and Rauch-Tung-Striebel smoother.
+"""The textbook steps of a linear Kalman filter and its fixed-interval smoother.
 
 Symbols as in filterpy (``filterpy.kalman.KalmanFilter``, ``rts_smoother``) and Bar-Shalom, Li &
 Kirubarajan (2001), ch. 5 and 8: state ``x``, covariance ``P``, transition ``F``, process noise
 ``Q``, control input ``u`` (already mapped into the state, ``B u``), measurement row ``H``
-(one scalar measurement ``z`` per update, of variance ``R``). Rauch, Tung & Striebel, AIAA J.
-3(8), 1965, doi:10.2514/3.3166. ``tests/test_smoother_kalman.py`` checks them against filterpy's
-on a linear-Gaussian toy.
+(one scalar measurement ``z`` per update, of variance ``R``).
+
+The smoother is the modified Bryson-Frazier form (Bierman, *Factorization Methods for Discrete
+Sequential Estimation*, 1977, ch. X): the same estimate as Rauch-Tung-Striebel's (AIAA J. 3(8),
+1965, doi:10.2514/3.3166), carried back as the adjoint ``lambda`` and its information
+``Lambda`` through each update and each transition, with no matrix to invert::
+
+    through an update (K = P H' / S, innovation y):
+        lambda <- (I - K H)' lambda - H' y / S
+        Lambda <- (I - K H)' Lambda (I - K H) + H' H / S
+    through a transition into step k:   lambda <- F' lambda,   Lambda <- F' Lambda F
+    smoothed at step k, from its filtered (x, P) and the adjoint after it:
+        x_s = x - P lambda,   P_s = P - P Lambda P
+
+With one scalar measurement an update and ``F`` the identity plus a few entries, each step is
+O(n^2) where Rauch-Tung-Striebel's gain ``P F' P_pred^-1`` is O(n^3); and only the variances
+asked for are made of ``P_s`` (of ``h``; of a sample's own row, ``H P_s H'``), each O(n^2).
+``tests/test_smoother_kalman.py`` checks the passes against filterpy's on a linear-Gaussian toy.
 
 Each step works in place on its arrays, as loops, with the caller's scratch arrays
 (:class:`Scratch`): compiled (:mod:`.compiled`), a flight's hundreds of thousands of steps then
@@ -14,8 +29,6 @@ allocate nothing (measured: 1.07 us a step with a new array per product, 0.08 us
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from altfuse.fuse.smoother.compiled import compiled
@@ -23,6 +36,9 @@ from altfuse.model import FloatArray
 
 #: Work arrays for ``n`` states (:func:`scratch`): three (n, n), two (n,).
 Scratch = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+#: ``F`` as the kernels take it: the dense matrix, and its entries off the diagonal (rows of
+#: (i, k)), where alone it differs from the identity.
+Transition = tuple[FloatArray, np.ndarray]
 
 
 @compiled
@@ -33,51 +49,40 @@ def scratch(n: int) -> Scratch:
 
 @compiled
 def predict(
-    x: FloatArray,
-    p: FloatArray,
-    f: FloatArray,
-    q: FloatArray,
-    u: FloatArray,
-    work: Scratch,
+    x: FloatArray, p: FloatArray, fl: Transition, q: FloatArray, u: FloatArray, work: Scratch
 ) -> None:
     """The prior at the next step, in place: the state and its covariance carried through F."""
+    f, links = fl
     xw = work[3]
-    n = x.size
-    # x = F x + B u
-    for i in range(n):
-        total = u[i]
-        for k in range(n):
-            total += f[i, k] * x[k]
-        xw[i] = total
+    # x = F x + B u = x + E x + B u  (F = I + E)
+    for i in range(x.size):
+        xw[i] = x[i] + u[i]
+    for e in range(links.shape[0]):
+        i, k = links[e, 0], links[e, 1]
+        xw[i] += f[i, k] * x[k]
     x[:] = xw
-    predict_covariance(p, f, q, work)
+    predict_covariance(p, fl, q, work)
 
 
 @compiled
-def predict_covariance(
-    p: FloatArray,
-    f: FloatArray,
-    q: FloatArray,
-    work: Scratch,
-) -> None:
+def predict_covariance(p: FloatArray, fl: Transition, q: FloatArray, work: Scratch) -> None:
     """The prior's covariance, in place (:func:`predict` without the state)."""
+    f, links = fl
     fp = work[0]
     n = p.shape[0]
-    # P = F P F' + Q  (F is sparse: an identity and a few entries)
+    # P = F P F' + Q:  F P = P + E P, then (F P) F' = F P + (F P) E'
+    fp[:] = p
+    for e in range(links.shape[0]):
+        i, k = links[e, 0], links[e, 1]
+        for j in range(n):
+            fp[i, j] += f[i, k] * p[k, j]
     for i in range(n):
         for j in range(n):
-            total = 0.0
-            for k in range(n):
-                if f[i, k] != 0.0:
-                    total += f[i, k] * p[k, j]
-            fp[i, j] = total
-    for i in range(n):
-        for j in range(n):
-            total = q[i, j]
-            for k in range(n):
-                if f[j, k] != 0.0:
-                    total += fp[i, k] * f[j, k]
-            p[i, j] = total
+            p[i, j] = fp[i, j] + q[i, j]
+    for e in range(links.shape[0]):
+        j, k = links[e, 0], links[e, 1]
+        for i in range(n):
+            p[i, j] += fp[i, k] * f[j, k]
 
 
 @compiled
@@ -120,87 +125,81 @@ def update(x: FloatArray, p: FloatArray, y: float, s: float, ph: FloatArray) -> 
 
 
 @compiled
-def rts_step(
-    smoothed: tuple[FloatArray, FloatArray],
-    predicted_next: tuple[FloatArray, FloatArray],
-    smoothed_next: tuple[FloatArray, FloatArray],
-    f: FloatArray,
+def adjoint_update(
+    adjoint: tuple[FloatArray, FloatArray],
+    h: FloatArray,
+    measured: tuple[FloatArray, float, float],
     work: Scratch,
 ) -> None:
-    """One backward step, in place: ``smoothed`` holds the filtered (x, P) at ``k`` and
-    becomes the smoothed one, from the prior at ``k + 1`` (``F`` between them) and the smoothed
-    one at ``k + 1``."""
-    xs, ps = smoothed
-    xp, pp = predicted_next
-    xn, pn = smoothed_next
-    c, _, d, dx, _ = work
-    n = xs.size
-    _smoother_gain(ps, pp, f, work)
-    # x_s = x_f + C (x_s(k+1) - x_p(k+1))
+    """The smoother's adjoint ``(lambda, Lambda)`` carried back through an update, in place:
+    from after it to before it. ``measured``: the update's ``P H'`` (the prior's), ``S`` and
+    innovation ``y``, as :func:`innovation` gave them."""
+    lam, big = adjoint
+    ph, s, y = measured
+    w = work[3]
+    n = lam.size
+    # K = P H' / S;  lambda = (I - K H)' lambda - H' y / S = lambda - H' (K' lambda + y / S)
+    a = y / s
     for i in range(n):
-        dx[i] = xn[i] - xp[i]
+        a += ph[i] / s * lam[i]
+    for i in range(n):
+        lam[i] -= h[i] * a
+    # Lambda = (I - K H)' Lambda (I - K H) + H' H / S
+    #        = Lambda - H' (Lambda K)' - (Lambda K) H + H' H (K' Lambda K + 1 / S)
+    b = 1.0 / s
     for i in range(n):
         total = 0.0
-        for k in range(n):
-            total += c[i, k] * dx[k]
-        xs[i] += total
-    # P_s = P_f + C (P_s(k+1) - P_p(k+1)) C'
+        for j in range(n):
+            total += big[i, j] * ph[j] / s
+        w[i] = total
+        b += ph[i] / s * total
     for i in range(n):
         for j in range(n):
-            total = 0.0
-            for k in range(n):
-                total += c[i, k] * (pn[k, j] - pp[k, j])
-            d[i, j] = total
-    for i in range(n):
-        for j in range(n):
-            total = 0.0
-            for k in range(n):
-                total += d[i, k] * c[j, k]
-            ps[i, j] += total
+            big[i, j] += h[i] * (h[j] * b - w[j]) - w[i] * h[j]
 
 
 @compiled
-def _smoother_gain(
-    pf: FloatArray,
-    pp: FloatArray,
-    f: FloatArray,
-    work: Scratch,
-) -> None:
-    """The RTS gain into ``work[0]``: C = P_f F' P_p(k+1)^-1, solved, not inverted
-    (P_p C' = F P_f, with P_p = L L' symmetric positive definite)."""
-    c, low, d, _, _ = work
-    n = pf.shape[0]
-    for i in range(n):
-        for j in range(n):
-            total = 0.0
-            for k in range(n):
-                total += f[i, k] * pf[k, j]
-            d[i, j] = total  # F P_f
-    _cholesky(pp, low)
-    for col in range(n):
-        for i in range(n):  # L w = (F P_f)[:, col]
-            total = d[i, col]
-            for k in range(i):
-                total -= low[i, k] * c[col, k]
-            c[col, i] = total / low[i, i]
-        for i in range(n - 1, -1, -1):  # L' C'[:, col] = w
-            total = c[col, i]
-            for k in range(i + 1, n):
-                total -= low[k, i] * c[col, k]
-            c[col, i] = total / low[i, i]
+def adjoint_predict(adjoint: tuple[FloatArray, FloatArray], fl: Transition, work: Scratch) -> None:
+    """The smoother's adjoint carried back through a transition, in place: from the prior at
+    step k to the posterior at k - 1 (``F`` between them)."""
+    lam, big = adjoint
+    f, links = fl
+    old, bf = work[3], work[0]
+    n = lam.size
+    # lambda = F' lambda = lambda + E' lambda
+    old[:] = lam
+    for e in range(links.shape[0]):
+        i, k = links[e, 0], links[e, 1]
+        lam[k] += f[i, k] * old[i]
+    # Lambda = F' (Lambda F):  Lambda F = Lambda + Lambda E, then F' (Lambda F) adds E' (Lambda F)
+    bf[:] = big
+    for e in range(links.shape[0]):
+        i, k = links[e, 0], links[e, 1]
+        for r in range(n):
+            bf[r, k] += big[r, i] * f[i, k]
+    big[:] = bf
+    for e in range(links.shape[0]):
+        i, k = links[e, 0], links[e, 1]
+        for c in range(n):
+            big[k, c] += f[i, k] * bf[i, c]
 
 
 @compiled
-def _cholesky(a: FloatArray, low: FloatArray) -> None:
-    """``a = L L'`` for a symmetric positive definite ``a``: ``L`` into ``low``."""
-    n = a.shape[0]
-    for j in range(n):
-        total = a[j, j]
-        for k in range(j):
-            total -= low[j, k] * low[j, k]
-        low[j, j] = math.sqrt(total)
-        for i in range(j + 1, n):
-            total = a[i, j]
-            for k in range(j):
-                total -= low[i, k] * low[j, k]
-            low[i, j] = total / low[j, j]
+def smoothed_variance(p: FloatArray, big: FloatArray, h: FloatArray, work: Scratch) -> float:
+    """``H P_s H'`` of a row ``h``, from the filtered ``P`` and the adjoint's ``Lambda`` after it:
+    ``H P H' - (P H')' Lambda (P H')``."""
+    g = work[4]
+    n = h.size
+    # g = P H'
+    for i in range(n):
+        total = 0.0
+        for j in range(n):
+            total += p[i, j] * h[j]
+        g[i] = total
+    var = 0.0
+    for i in range(n):
+        total = 0.0
+        for j in range(n):
+            total += big[i, j] * g[j]
+        var += h[i] * g[i] - g[i] * total
+    return var

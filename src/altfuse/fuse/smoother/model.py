@@ -12,6 +12,7 @@ from typing import Literal
 import numpy as np
 
 from altfuse.fuse.smoother.compiled import compiled
+from altfuse.fuse.smoother.kalman import innovation, update
 from altfuse.metrics import mad_sigma
 from altfuse.model import FloatArray, Samples
 
@@ -133,11 +134,19 @@ class Layout:
         return replace(self, drifting=tuple(i for i, k in enumerate(kinds) if k == "baro"))
 
 
+def couplings(use_bias: bool, drifts: np.ndarray) -> np.ndarray:
+    """The entries (row, column) of ``F`` off its diagonal that :func:`transition` sets,
+    shape (k, 2): the kernels take ``F`` as the identity plus these."""
+    pairs = [(0, 1)] + ([(0, 2), (1, 2)] if use_bias else [])
+    pairs += [(int(c), int(rate)) for c, rate in drifts]
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+
+
 @compiled
 def transition(f: FloatArray, dt: float, use_bias: bool, drifts: np.ndarray) -> None:
-    """F over ``dt``, into ``f`` (an identity but for these entries): h += v dt - b dt^2/2,
-    v += -b dt, c_i += r_i dt for a sensor with a drift rate ``r_i`` (``drifts``: (offset,
-    rate) state pairs); the rest random walks."""
+    """F over ``dt``, into ``f`` (an identity but for the entries :func:`couplings` lists):
+    h += v dt - b dt^2/2, v += -b dt, c_i += r_i dt for a sensor with a drift rate ``r_i``
+    (``drifts``: (offset, rate) state pairs); the rest random walks."""
     f[0, 1] = dt
     if use_bias:
         f[0, 2], f[1, 2] = -0.5 * dt * dt, -dt
@@ -211,20 +220,18 @@ def measurement_matrix(layout: Layout, who: np.ndarray) -> FloatArray:
 
 
 @compiled
-def hold_still(x: FloatArray, p: FloatArray) -> None:
+def hold_still(x: FloatArray, p: FloatArray, record: FloatArray) -> None:
     """On the ground before take-off, in place: h = 0 and v = 0 (the datum's definition), as
-    two measurements of variance ``STILL_SIGMA^2``."""
+    two measurements of variance ``STILL_SIGMA^2``. Each one's ``P H'``, ``S`` and innovation go
+    into a row of ``record`` (2, n + 2), for the smoother's backward pass."""
     n = x.size
     for j in (0, 1):
-        s = p[j, j] + STILL_SIGMA**2
-        xj = x[j]
-        row = p[j].copy()
-        for i in range(n):
-            x[i] -= p[i, j] / s * xj
-        for i in range(n):
-            ki = p[i, j] / s
-            for c in range(n):
-                p[i, c] -= ki * row[c]
+        row = np.zeros(n)
+        row[j] = 1.0
+        ph = record[j, :n]
+        y, s = innovation(x, p, 0.0, row, STILL_SIGMA**2, ph)
+        record[j, n], record[j, n + 1] = s, y
+        update(x, p, y, s, ph)
 
 
 def prior(ev: Events, layout: Layout) -> tuple[FloatArray, FloatArray]:

@@ -330,7 +330,7 @@ def measurement_noise(
 
 def em_scale(ev: Events, layout: Layout, noise: Noise, out: dict[str, np.ndarray]) -> None:
     """EM, M-step: each sensor's noise scale from the smoothed residuals (in place)."""
-    xs, ps = out["x"], out["p"]
+    xs = out["x"]
     sign = layout.sign
     for i in range(sign.size):
         mine = (ev.who == i) & out["accepted"]
@@ -343,8 +343,7 @@ def em_scale(ev: Events, layout: Layout, noise: Noise, out: dict[str, np.ndarray
             [np.ones(mine.sum()), np.full(mine.sum(), sign[i])] + [r.coef[mine] for _, r in regs]
         )
         resid = ev.z[mine] - np.einsum("ka,ka->k", coef, xs[mine][:, cols])
-        var_h = np.einsum("ka,kab,kb->k", coef, ps[mine][:, cols][:, :, cols], coef)
-        ratio = (resid**2 + var_h) / noise.base[mine]
+        ratio = (resid**2 + out["var_row"][mine]) / noise.base[mine]
         ratio = ratio[np.isfinite(ratio)]  # a state the filter lost (damaged stamps) says nothing
         if ratio.size:
             noise.scale[i] = max(float(np.mean(ratio)), 1e-4)

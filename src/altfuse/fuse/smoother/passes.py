@@ -1,6 +1,6 @@
 """The smoother's passes over the events: the forward Kalman filter, with its innovation gate and
-lockout release, and the Rauch-Tung-Striebel backward pass (steps from :mod:`.kalman`), each one
-compiled loop over the events (:mod:`.compiled`)."""
+lockout release, and the backward pass (the modified Bryson-Frazier smoother; steps from
+:mod:`.kalman`), each one compiled loop over the events (:mod:`.compiled`)."""
 
 from __future__ import annotations
 
@@ -10,16 +10,19 @@ import numpy as np
 
 from altfuse.fuse.smoother.compiled import compiled
 from altfuse.fuse.smoother.kalman import (
+    Transition,
+    adjoint_predict,
+    adjoint_update,
     innovation,
     predict,
-    predict_covariance,
-    rts_step,
     scratch,
+    smoothed_variance,
     update,
 )
 from altfuse.fuse.smoother.model import (
     Events,
     Layout,
+    couplings,
     hold_still,
     measurement_matrix,
     prior,
@@ -36,21 +39,29 @@ AGREED_LOCKOUT_S = 0.5
 
 
 def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[str, np.ndarray]:
-    """Forward filter and (if ``smooth``) RTS pass over the events: the states and diagnostics.
+    """Forward filter and (if ``smooth``) the backward pass over the events: the states (``x``),
+    the variance of ``h`` (``var_h``) and of each sample's own measurement row ``H x``
+    (``var_row``, NaN at a tick), smoothed (or filtered), and diagnostics.
 
     ``r`` is each event's measurement variance. Also each accepted sample's log-likelihood (its
     innovation's density; NaN elsewhere): the evidence by which :func:`evidence_gain` compares two
     models.
     """
-    x0, p0 = prior(ev, layout)
+    measured = _measured(ev, r, layout)
     dynamics = _dynamics(ev, layout)
-    xp, xf, pf, released, gain_h, accepted, loglik, nu = _forward(
-        _measured(ev, r, layout), dynamics, ev.still.astype(np.bool_), ev.gate, (x0, p0), True
+    still = ev.still.astype(np.bool_)
+    xf, pf, updates, holds, gain_h, accepted, loglik, nu = _forward(
+        measured, dynamics, still, ev.gate, prior(ev, layout), True
     )
+    h, who = measured[4], measured[1]
     if smooth:
-        _backward(ev.t, (xp, xf, pf, released, ev.who.astype(np.int64)), dynamics)
+        var_h, var_row = _backward(ev.t, (xf, pf, updates, holds, still), (who, h), dynamics)
+    else:
+        var_h = pf[:, 0, 0].copy()
+        var_row = np.where(who >= 0, np.einsum("ki,kij,kj->k", h, pf, h), np.nan)
     return {
-        "x": xf, "p": pf, "gain_h": gain_h, "accepted": accepted, "loglik": loglik, "nu": nu
+        "x": xf, "var_h": var_h, "var_row": var_row, "gain_h": gain_h, "accepted": accepted,
+        "loglik": loglik, "nu": nu,
     }  # fmt: skip
 
 
@@ -78,16 +89,19 @@ def _measured(
 
 def _dynamics(
     ev: Events, layout: Layout
-) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool]:
-    """The events' accelerations and process-noise densities, as the kernels take them."""
+) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray]:
+    """The events' accelerations and process-noise densities, and F's structure (the drifting
+    offsets' state pairs, whether the bias is a state, F's entries off its diagonal), as the
+    kernels take them."""
     q_state = np.ascontiguousarray(ev.q_state, dtype=np.float64)
-    return ev.a, ev.q_accel, q_state, layout.drift_pairs.astype(np.int64), ev.use_bias
+    drifts = layout.drift_pairs.astype(np.int64)
+    return ev.a, ev.q_accel, q_state, drifts, ev.use_bias, couplings(ev.use_bias, drifts)
 
 
 @compiled
 def _forward(
     measured: tuple[FloatArray, np.ndarray, FloatArray, FloatArray, FloatArray],
-    dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool],
+    dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray],
     still: np.ndarray,
     gate: float,
     start: tuple[FloatArray, FloatArray],
@@ -95,63 +109,66 @@ def _forward(
 ) -> tuple[
     FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray, FloatArray, FloatArray
 ]:
-    """The forward filter: each event's prior state, posterior state and covariance, what the
-    lockout release added to the prior's (h, v) variances there (and to the sample's sensor
-    state, where a rangefinder's ground height was let loose), each sample's gain on h,
-    whether it passed the gate, its log-likelihood and its normalised innovation
-    ``y / sqrt(S)``. The priors' covariances are not kept (a flight's worth is hundreds of
-    megabytes): :func:`_backward` makes them again.
+    """The forward filter: each event's posterior state and covariance; what the backward pass
+    needs of its updates (per event: the sample's ``P H'``, ``S`` and innovation, ``S`` 0 where
+    it was not fused; per event on the ground: the same of its two holds); each sample's gain
+    on h, whether it passed the gate, its log-likelihood and its normalised innovation
+    ``y / sqrt(S)``.
 
     ``measured``: the events' times, series (-1 a tick), values, variances and rows of H;
     ``dynamics``: the mean acceleration over the interval ending at each event, the white
     acceleration density there, the sensor states' densities, the drifting offsets' (offset,
-    rate) state pairs and whether the bias is a state; ``start``: the prior; ``keep``: whether
-    to keep the states and covariances (else one slot, overwritten).
+    rate) state pairs, whether the bias is a state and F's entries off its diagonal;
+    ``start``: the prior; ``keep``: whether to keep the states, covariances and updates (else
+    one slot, overwritten).
     """
     t, who, z, r, h = measured
-    a, q_accel, q_state, drifts, use_bias = dynamics
+    a, q_accel, q_state, drifts, use_bias, links = dynamics
     x, p = start[0].copy(), start[1].copy()
     count, n = h.shape
     kept = count if keep else 1
-    xp = np.zeros((kept, n))
-    released = np.zeros((count, 3))  # added to the prior's h, v and the sample's sensor state
     sensor_accepted = np.full(n, np.nan)  # per state: its sensor's last accepted sample [s]
     sensor_r = np.full(n, np.inf)  # ... and that sample's variance
     refused = np.full((n, 2), np.nan)  # per state: its sensor's last rejection [s] and side
-    xf = np.zeros((kept, n))
-    pf = np.zeros((kept, n, n))
-    gain_h = np.zeros(count)
-    accepted = np.zeros(count, dtype=np.bool_)
-    loglik = np.full(count, np.nan)
-    nu = np.full(count, np.nan)
-    f, q, u = np.eye(n), np.zeros((n, n)), np.zeros(n)
+    xf, pf, updates, holds = _kept(kept, n, int(still.sum()) if keep else 1)
+    gain_h, accepted, loglik, nu = (
+        np.zeros(count),
+        np.zeros(count, dtype=np.bool_),
+        np.full(count, np.nan),
+        np.full(count, np.nan),
+    )
+    fl: Transition = (np.eye(n), links)
+    q, u = np.zeros((n, n)), np.zeros(n)
     work = scratch(n)
     ph = work[4]
     y = s = 0.0
     previous = last_accepted = t[0]
+    held = 0
     for k in range(count):
         dt = t[k] - previous
         previous = t[k]
         if dt > 0:
             # the accelerometer as the control input: B u = [a dt^2 / 2, a dt, 0, ...]
             u[0], u[1] = 0.5 * a[k] * dt * dt, a[k] * dt
-            transition(f, dt, use_bias, drifts)
+            transition(fl[0], dt, use_bias, drifts)
             process_noise(q, dt, q_accel[k], q_state[k], use_bias, drifts)
-            predict(x, p, f, q, u, work)
+            predict(x, p, fl, q, u, work)
         i = who[k]
+        slot = k if keep else 0
         if i >= 0:
             y, s = innovation(x, p, z[k], h[k], r[k], ph)
             if math.isnan(sensor_accepted[3 + i]):
                 sensor_accepted[3 + i] = t[k]
             if y * y > gate * gate * s:  # shut: has the estimate, or a ground, gone astray?
                 seen = (t[k], r[k], h[k, 3 + i], last_accepted, sensor_accepted, sensor_r)
-                if _release(k, 3 + i, y, (seen, refused), p, released):
+                if _release(3 + i, y, (seen, refused), p):
                     y, s = innovation(x, p, z[k], h[k], r[k], ph)
                 refused[3 + i, 0], refused[3 + i, 1] = t[k], math.copysign(1.0, y)
             nu[k] = y / math.sqrt(s)
-        xp[k if keep else 0] = x
         # the innovation gate: |y| <= gate sqrt(S)
         if i >= 0 and y * y <= gate * gate * s:
+            updates[slot, :n] = ph
+            updates[slot, n], updates[slot, n + 1] = s, y
             gain_h[k] = abs(update(x, p, y, s, ph))
             accepted[k] = True
             last_accepted = sensor_accepted[3 + i] = t[k]
@@ -159,9 +176,18 @@ def _forward(
             # log N(y; 0, S)
             loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
         if still[k]:
-            hold_still(x, p)
-        xf[k if keep else 0], pf[k if keep else 0] = x, p
-    return xp, xf, pf, released, gain_h, accepted, loglik, nu
+            hold_still(x, p, holds[held if keep else 0])
+            held += 1
+        xf[slot], pf[slot] = x, p
+    return xf, pf, updates, holds, gain_h, accepted, loglik, nu
+
+
+@compiled
+def _kept(kept: int, n: int, held: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """What :func:`_forward` keeps for the backward pass: ``kept`` states and covariances, the
+    ``P H'``, ``S`` and ``y`` of ``kept`` events' samples and of ``held`` events' two holds."""
+    states, covariances = np.zeros((kept, n)), np.zeros((kept, n, n))
+    return states, covariances, np.zeros((kept, n + 2)), np.zeros((held, 2, n + 2))
 
 
 @compiled
@@ -176,16 +202,14 @@ def _agreed(c: int, y: float, last_accepted: float, refused: FloatArray) -> bool
 
 @compiled
 def _release(
-    k: int,
     c: int,
     y: float,
     seen: tuple[tuple[float, float, float, float, FloatArray, FloatArray], FloatArray],
     p: FloatArray,
-    released: FloatArray,
 ) -> bool:
-    """Sample ``k`` of the sensor with state ``c`` fails the gate by the innovation ``y``: let
-    loose what has gone astray, in place on ``p`` and ``released[k]``, and say whether anything
-    was. ``seen``: the sample's time and variance, its row of H at ``c``, the last accepted
+    """A sample of the sensor with state ``c`` fails the gate by the innovation ``y``: let
+    loose what has gone astray, in place on the prior's covariance ``p``, and say whether
+    anything was. ``seen``: the sample's time and variance, its row of H at ``c``, the last accepted
     sample's time, per state its sensor's last accepted sample [s] and that one's variance;
     and per state its sensor's last rejection [s] and its side (the innovation's sign)."""
     (now, r, sign, last_accepted, sensor_accepted, sensor_r), refused = seen
@@ -198,9 +222,8 @@ def _release(
         # uncertain as this sample says. Two sensors agreeing against a confident estimate
         # for 2.5 s left it 1.4 m under both after a PX4 simulator's landing (the touchdown
         # absent from the logged IMU)
-        released[k, 0], released[k, 1] = y2, y2 / LOCKOUT_S**2
-        p[0, 0] += released[k, 0]
-        p[1, 1] += released[k, 1]
+        p[0, 0] += y2
+        p[1, 1] += y2 / LOCKOUT_S**2
         return True
     if sign < 0.0 and now - sensor_accepted[c] > LOCKOUT_S:
         # a rangefinder alone has failed the gate for LOCKOUT_S while a sensor at least as
@@ -210,7 +233,6 @@ def _release(
         # followed the estimate's drift instead of correcting it (Paper A: 0.138 -> 0.170 m).
         for j in range(3, sensor_r.size):
             if j != c and now - sensor_accepted[j] <= LOCKOUT_S and sensor_r[j] <= r:
-                released[k, 2] = y2
                 p[c, c] += y2
                 return True
     return False
@@ -220,25 +242,52 @@ def _release(
 def _backward(
     t: FloatArray,
     filtered: tuple[FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray],
-    dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool],
-) -> None:
-    """The Rauch-Tung-Striebel pass (:func:`.kalman.rts_step`) back over the filtered events, in
-    place: the filtered states and covariances become the smoothed ones. Each prior covariance
-    is made again from the filtered one before it, as :func:`_forward` made it."""
-    xp, xs, ps, released, who = filtered
-    _, q_accel, q_state, drifts, use_bias = dynamics
-    n = xs.shape[1]
-    f, q, pp = np.eye(n), np.zeros((n, n)), np.zeros((n, n))
+    rows: tuple[np.ndarray, FloatArray],
+    dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray],
+) -> tuple[FloatArray, FloatArray]:
+    """The modified Bryson-Frazier pass (:mod:`.kalman`) back over the filtered events: the
+    filtered states become the smoothed ones, in place; returns the smoothed variance of ``h``
+    at every event and of each sample's own row ``H x`` (NaN at a tick).
+
+    ``filtered``: :func:`_forward`'s states, covariances, updates and holds, and which events
+    are on the ground; ``rows``: the events' series and rows of H. The covariances are left
+    filtered: only the variances asked for are made of the smoothed ones."""
+    xs, pf, updates, holds, still = filtered
+    who, h = rows
+    _, _, _, drifts, use_bias, links = dynamics
+    count, n = xs.shape
+    fl: Transition = (np.eye(n), links)
     work = scratch(n)
-    for k in range(t.size - 2, -1, -1):
-        dt = t[k + 1] - t[k]
-        transition(f, dt, use_bias, drifts)  # the identity where dt is 0
-        pp[:] = ps[k]  # still the filtered covariance at k
+    adjoint = (np.zeros(n), np.zeros((n, n)))  # after the last event: nothing to come
+    lam = adjoint[0]
+    unit = np.zeros((2, n))
+    unit[0, 0] = unit[1, 1] = 1.0
+    var_h = np.zeros(count)
+    var_row = np.full(count, np.nan)
+    held = holds.shape[0] if still.any() else 0
+    for k in range(count - 1, -1, -1):
+        p = pf[k]
+        # smoothed at k: x_s = x - P lambda;  var = H P H' - (P H')' Lambda (P H')
+        var_h[k] = smoothed_variance(p, adjoint[1], unit[0], work)
+        if who[k] >= 0:
+            var_row[k] = smoothed_variance(p, adjoint[1], h[k], work)
+        for i in range(n):
+            total = 0.0
+            for j in range(n):
+                total += p[i, j] * lam[j]
+            xs[k, i] -= total
+        # back through the event's updates, last first: its holds, then its sample
+        if still[k]:
+            held -= 1
+            for j in (1, 0):
+                record = holds[held, j]
+                adjoint_update(adjoint, unit[j], (record[:n], record[n], record[n + 1]), work)
+        if updates[k, n] > 0.0:
+            record = updates[k]
+            adjoint_update(adjoint, h[k], (record[:n], record[n], record[n + 1]), work)
+        # and through the transition into k
+        dt = t[k] - t[k - 1] if k > 0 else 0.0
         if dt > 0:
-            process_noise(q, dt, q_accel[k + 1], q_state[k + 1], use_bias, drifts)
-            predict_covariance(pp, f, q, work)
-        pp[0, 0] += released[k + 1, 0]
-        pp[1, 1] += released[k + 1, 1]
-        if released[k + 1, 2] > 0.0:
-            pp[3 + who[k + 1], 3 + who[k + 1]] += released[k + 1, 2]
-        rts_step((xs[k], ps[k]), (xp[k + 1], pp), (xs[k + 1], ps[k + 1]), f, work)
+            transition(fl[0], dt, use_bias, drifts)
+            adjoint_predict(adjoint, fl, work)
+    return var_h, var_row
