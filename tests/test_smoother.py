@@ -176,6 +176,31 @@ def test_a_drifting_barometer_gets_a_drift_rate(
         assert params.get("baro_drift_loglik_gain", -1.0) < DRIFT_GAIN
 
 
+@pytest.mark.parametrize(("faults", "modelled"), [((), False), (("baro-scale",), True)])
+def test_a_barometer_scale_the_datum_cannot_tell_is_learnt_where_the_log_asks(
+    tmp_path: Path, faults: tuple[str, ...], modelled: bool
+) -> None:
+    """The mission climbs 15 m: against a GPS of 0.35 m noise the datum cannot tell a
+    barometer 7 % high (1.05 +- 0.03, not applied) and the smoother followed it, 0.93 m RMSE
+    against mean's 0.52. Now a scale error where the likelihood asks (a gain of 166): the
+    truth's 7 %, and 0.05 m; without the fault the log does not ask and none is modelled."""
+    log = tmp_path / "mission.bin"
+    write_simulated_log(simulate_flight("mission", 2, faults=faults), log)
+    result = evaluate(log, ["smoother"], truth="sim")
+    offsets = {o.name: o for o in result.prepared.referred.offsets}
+    assert offsets["baro"].scale_unknown
+    assert offsets["baro"].scale == 1.0
+    params = result.runs["smoother"].result.params
+    rmse = next(r.overall.rmse for r in result.rows if r.name == "smoother")
+    assert rmse < 0.1  # 0.050 and 0.059
+    if modelled:
+        assert params["baro_scale"] == "modelled"
+        assert params["scale_error_baro"] == pytest.approx(0.07, abs=0.015)  # 0.072
+    else:
+        assert params["baro_scale"].startswith("not modelled")  # a gain of -2.2
+        assert "scale_error_baro" not in params
+
+
 def test_a_step_in_every_sensor_without_acceleration_is_followed() -> None:
     """Issue 15: 5 m in every sensor at once, the accelerometer still (a spliced log, a reset):
     the gate rejects every sample, and after LOCKOUT_S the estimate is let loose, not locked

@@ -100,8 +100,18 @@ class Offset:
     ticks: int
     scale: float = 1.0
     scale_std: float | None = None
-    scale_method: str | None = None  # None: not a barometer
+    scale_method: str | None = None  # None: not a barometer, or not tested (referral "offset")
     on_ground: bool = False  # measured over the ground window (else matched, or a clearance)
+    scale_applied: bool = False
+    scale_estimate: float | None = None  # the fit's scale, applied or not; None: not estimated
+
+    @property
+    def scale_unknown(self) -> tuple[float, float] | None:
+        """A barometer whose scale was estimated and not applied (too little range, too much
+        noise, within its error of 1): the fit's scale and standard error; None otherwise."""
+        if self.scale_applied or self.scale_estimate is None or self.scale_std is None:
+            return None
+        return self.scale_estimate, self.scale_std
 
 
 @dataclass(frozen=True)
@@ -355,7 +365,13 @@ def _refer_segment(
             offsets, h, dropped = _refer(aligned, ground, scales)
         for i, sc in scales.items():
             if i in offsets:
-                offsets[i] = replace(offsets[i], scale_std=sc.std, scale_method=sc.how)
+                offsets[i] = replace(
+                    offsets[i],
+                    scale_std=sc.std,
+                    scale_method=sc.how,
+                    scale_applied=sc.applied,
+                    scale_estimate=sc.scale if sc.std is not None else None,
+                )
 
     keep = [i for i in range(len(aligned.names)) if i in offsets]
     return Referred(

@@ -231,6 +231,7 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         vibration=flight.vibration,
         imu_rate_hz=imu_rate,
         datum_windows=referred.datum_windows,
+        scale_unknown=tuple(o.scale_unknown for o in referred.offsets),
     )
 
 

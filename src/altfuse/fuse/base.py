@@ -63,6 +63,10 @@ class FusionInput:
         Each sensor's span [s] over which its offset was measured standing at the take-off
         point, in ``z``'s order; None where it was not (matched to another sensor, a log
         without a take-off).
+    scale_unknown
+        Per sensor, in ``z``'s order: for a barometer whose scale the datum estimated and did not
+        apply, that estimate and its standard error (:attr:`altfuse.datum.Offset.scale_unknown`);
+        None otherwise.
     """
 
     t: FloatArray
@@ -79,6 +83,7 @@ class FusionInput:
     vibration: Vibration | None = None
     imu_rate_hz: float | None = None
     datum_windows: tuple[tuple[float, float] | None, ...] = ()
+    scale_unknown: tuple[tuple[float, float] | None, ...] = ()
 
     def __post_init__(self) -> None:
         n = self.z.shape[1] if self.z.ndim == 2 else -1
@@ -93,6 +98,10 @@ class FusionInput:
             object.__setattr__(self, "datum_windows", (None,) * n)
         if len(self.datum_windows) != n:
             raise ValueError(f"{len(self.datum_windows)} datum windows for {n} sensors")
+        if not self.scale_unknown:
+            object.__setattr__(self, "scale_unknown", (None,) * n)
+        if len(self.scale_unknown) != n:
+            raise ValueError(f"{len(self.scale_unknown)} scale flags for {n} sensors")
         if self.accel is not None and self.accel.on_clock.shape != self.t.shape:
             shape = self.accel.on_clock.shape
             raise ValueError(f"accel has shape {shape} for a clock of {self.t.size} ticks")

@@ -66,9 +66,11 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
 
 
 def likelihood(ev: Events, r: FloatArray, layout: Layout) -> dict[str, np.ndarray]:
-    """The forward filter's verdicts alone: which samples it accepted and their log-likelihood
-    (:func:`run` without keeping any covariance: a flight's worth is hundreds of megabytes)."""
-    _, _, _, _, _, accepted, loglik, _ = _forward(
+    """The forward filter's verdicts alone: which samples it accepted and their log-likelihood,
+    and its state after the last event (``last``: a constant state's estimate from the whole
+    flight); :func:`run` without keeping any covariance (a flight's worth is hundreds of
+    megabytes)."""
+    last, _, _, _, _, accepted, loglik, _ = _forward(
         _measured(ev, r, layout),
         _dynamics(ev, layout),
         ev.still.astype(np.bool_),
@@ -76,7 +78,7 @@ def likelihood(ev: Events, r: FloatArray, layout: Layout) -> dict[str, np.ndarra
         prior(ev, layout),
         False,
     )
-    return {"accepted": accepted, "loglik": loglik}
+    return {"accepted": accepted, "loglik": loglik, "last": last[0]}
 
 
 def _measured(
