@@ -40,11 +40,10 @@ from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
-import pandas as pd
 
 from altfuse.align import Aligned, merge_duplicates
 from altfuse.errors import NoUsableSensorsError
-from altfuse.metrics import MAD_TO_SIGMA
+from altfuse.metrics import MAD_TO_SIGMA, running_median
 from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Samples, SensorKind, Series
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
@@ -239,7 +238,7 @@ def detect_takeoff(
         return None
     ground = float(np.median(h[start]))
     window = max(1, round(rate_hz))
-    smooth = pd.Series(h).rolling(window, center=True, min_periods=1).median().to_numpy()
+    smooth = running_median(h, window)
     above = np.flatnonzero(valid & (smooth > ground + climb_m))
     return float(t[above[0]]) if above.size else None
 

@@ -42,9 +42,8 @@ from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
-import pandas as pd
 
-from altfuse.metrics import white_noise_sigma
+from altfuse.metrics import running_median, white_noise_sigma
 from altfuse.model import Attitude, FlightLog, FloatArray, Imu, Series, Vibration
 
 Mask = npt.NDArray[np.bool_]
@@ -134,7 +133,7 @@ def _out_of_order(t: FloatArray) -> Mask:
     out = np.zeros(t.size, dtype=bool)
     if t.size >= 5:
         step = float(np.median(np.abs(np.diff(t))))
-        local = pd.Series(t).rolling(5, center=True, min_periods=1).median().to_numpy()
+        local = running_median(t, 5)
         out = np.abs(t - local) > max(1.0, 10.0 * step)
     kept = np.flatnonzero(~out)
     earlier = np.maximum.accumulate(np.concatenate(([-np.inf], t[kept][:-1])))

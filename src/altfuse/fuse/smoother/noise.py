@@ -10,12 +10,18 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 
 from altfuse.fuse.base import FusionInput
 from altfuse.fuse.smoother.events import interval_mean
 from altfuse.fuse.smoother.model import Events, Layout
-from altfuse.metrics import MAD_TO_SIGMA, mad_sigma, white_noise_sigma
+from altfuse.metrics import (
+    MAD_TO_SIGMA,
+    hold_nearest,
+    mad_sigma,
+    running_median,
+    running_sum,
+    white_noise_sigma,
+)
 from altfuse.model import FloatArray, Samples
 
 #: White acceleration noise densities [m^2/s^3]: the default, its floor with the accelerometer,
@@ -88,7 +94,7 @@ def accel_spikes(t: FloatArray, a: FloatArray) -> FloatArray:
         return np.zeros(a.size)
     step = float(np.median(np.diff(t)))
     width = max(SPIKE_MIN_SAMPLES, round(SPIKE_WINDOW_S / step) if step > 0 else 0) | 1
-    e = a - pd.Series(a).rolling(width, center=True, min_periods=1).median().to_numpy()
+    e = a - running_median(a, width)
     excess = np.maximum(np.abs(e) - SPIKE_SIGMAS * mad_sigma(e), 0.0)
     dt = np.diff(t, append=t[-1] + step)
     return np.asarray(excess**2 * np.maximum(dt, 0.0))
@@ -101,10 +107,9 @@ def _slope(t: FloatArray, z: FloatArray, width: int) -> tuple[FloatArray, FloatA
     ok = np.isfinite(z)
     tt, zz = np.where(ok, t - t[0], 0.0), np.where(ok, z, 0.0)
 
-    def rolling(v: FloatArray) -> FloatArray:
-        return np.asarray(pd.Series(v).rolling(width, center=True, min_periods=1).sum())
-
-    n, st, sz, stt, stz = (rolling(v) for v in (ok.astype(float), tt, zz, tt * tt, tt * zz))
+    n, st, sz, stt, stz = (
+        running_sum(v, width) for v in (ok.astype(float), tt, zz, tt * tt, tt * zz)
+    )
     with np.errstate(invalid="ignore", divide="ignore"):
         sxx = stt - st * st / n
         slope = (stz - st * sz / n) / sxx
@@ -179,7 +184,7 @@ def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) 
     step = float(np.median(np.diff(t)))
     # stamps microseconds apart (damaged) must not ask for a window longer than the samples
     width = min(z.size, max(5, round(window_s / step))) if step > 0 else z.size
-    med = pd.Series(d2).rolling(width, center=True, min_periods=3).median().to_numpy()
+    med = running_median(d2, width, min_periods=3)
     sigma = np.where(np.isfinite(med), MAD_TO_SIGMA * med / math.sqrt(6.0), measurement_sigma(z))
     return np.asarray(np.maximum(sigma, _MIN_SIGMA_M))
 
@@ -282,7 +287,7 @@ def state_noise(
     flown = np.cumsum(np.nan_to_num(flown_speed) * np.diff(t, prepend=t[0]))
     flown[np.isnan(flown_speed)] = np.nan
     # outside the speed's span (a GPS lost in flight) the last known speed is held
-    speed_events = pd.Series(interval_mean(v, times)).ffill().bfill().to_numpy()
+    speed_events = hold_nearest(interval_mean(v, times))
     noise = [measurement_sigma(col[np.isfinite(col)]) for col in z.T]
     others = [j for j, k in enumerate(kinds) if k != "rangefinder"]
     for i in ranges:
