@@ -25,10 +25,10 @@ from typing import Literal, get_args
 
 import numpy as np
 import numpy.typing as npt
-from scipy.interpolate import CubicSpline
 
 from altfuse.errors import NoUsableSensorsError
 from altfuse.model import FloatArray, SensorKind, Series, sensor_kind
+from altfuse.spline import cubic_spline
 
 Span = Literal["union", "overlap"]
 SPANS: tuple[Span, ...] = get_args(Span)
@@ -132,7 +132,7 @@ def resample(
         lo = np.searchsorted(grid, ts[0] - eps, side="left")
         hi = np.searchsorted(grid, ts[-1] + eps, side="right")
         if hi > lo:
-            out[lo:hi] = CubicSpline(ts, vs)(grid[lo:hi])
+            out[lo:hi] = cubic_spline(ts, vs, grid[lo:hi])
     stats = AlignStats(
         samples=n_in,
         duplicates_merged=duplicates,
