@@ -15,10 +15,9 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Literal, get_args
+from typing import TYPE_CHECKING, Any, Literal, get_args
 
 import numpy as np
-import pandas as pd
 
 from altfuse.datum import Referred
 from altfuse.errors import AltfuseError, NoUsableSensorsError
@@ -27,6 +26,9 @@ from altfuse.metrics import ErrorStats, error_stats
 from altfuse.model import FlightLog, FloatArray, Series
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions, FuseRun, Prepared, prepare_log, run_method
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: What to measure against: the simulator's truth, the EKF's estimate, or the first of them.
 TruthChoice = Literal["auto", "sim", "ekf"]
@@ -311,6 +313,8 @@ def evaluate_prepared(
 
 def evaluation_table(result: Evaluation) -> pd.DataFrame:
     """One row per estimate and segment (``all`` for the whole flight), for scripts."""
+    import pandas as pd
+
     records = []
     for row in result.rows:
         for segment, stats in {"all": row.overall, **row.segments}.items():

@@ -42,7 +42,6 @@ import numpy as np
 from altfuse import __version__
 from altfuse.errors import ParameterError
 from altfuse.inertial import G
-from altfuse.io.dataflash_writer import DataFlashWriter
 from altfuse.model import FloatArray
 from altfuse.params import InvalidParameter
 from altfuse.write import atomic_outputs
@@ -464,6 +463,8 @@ def write_simulated_log(flight: SimulatedFlight, path: str | Path) -> int:
 
     def write(handle: BinaryIO) -> None:
         nonlocal records
+        from altfuse.io.dataflash_writer import DataFlashWriter  # pymavlink's tables: 50 ms
+
         writer = DataFlashWriter(handle)
         for name, (fmt, columns, units, mults) in _TYPES.items():
             writer.define(name, fmt, columns, units, mults)

@@ -17,17 +17,22 @@ import os
 import socket
 import sys
 import tempfile
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Literal
 
 import numpy as np
-import pandas as pd
 
 from altfuse.errors import AltfuseError, ParameterError
 
 if TYPE_CHECKING:
+    import pandas as pd
+
     from altfuse.pipeline import FuseRun
+
+#: A table as altfuse writes it: columns by name, in order, each an array of one row per entry
+#: (floats with NaN where there is no value, text, flags).
+Columns = Mapping[str, Any]
 
 #: The fused table's formats, by the output's suffix (any other suffix: CSV).
 TableFormat = Literal["csv", "parquet"]
@@ -61,38 +66,78 @@ def column_unit(name: str) -> str:
     return "1"
 
 
-def write_table(table: pd.DataFrame, fmt: TableFormat, metadata: dict[str, Any]) -> Writer:
+def write_table(table: Columns, fmt: TableFormat, metadata: dict[str, Any]) -> Writer:
     """A binary writer of ``table``: Parquet (each column's unit in its metadata, ``metadata``
     as JSON in the file's key-value metadata under ``altfuse``), or CSV (see
     ``CSV_DECIMALS``), both by Arrow's C++ writers: pandas' CSV writer formats each float in
-    Python (1.9 s of a 4 s run on a 300 MB log)."""
+    Python (1.9 s of a 4 s run on a 300 MB log). NaN, and None in text, are written as no
+    value (Parquet's null, an empty CSV field)."""
     import pyarrow as pa
+
+    columns = {name: np.asarray(values) for name, values in table.items()}
+
+    def arrow(rounded: bool) -> Any:
+        def column(values: np.ndarray) -> Any:
+            if rounded and values.dtype.kind == "f":
+                # + 0.0: no "-0" where a small negative value rounds to zero
+                values = np.round(values, CSV_DECIMALS) + 0.0
+            return arrow_column(values)
+
+        return pa.table({name: column(values) for name, values in columns.items()})
 
     def write(handle: IO[Any]) -> None:
         if fmt == "parquet":
             import pyarrow.parquet as pq
 
-            arrow = pa.Table.from_pandas(table, preserve_index=False)
+            plain = arrow(rounded=False)
             fields = [
                 f.with_metadata({"unit": column_unit(f.name) if _numeric(f.type) else ""})
-                for f in arrow.schema
+                for f in plain.schema
             ]
             schema = pa.schema(fields, metadata={"altfuse": json.dumps(metadata, default=str)})
-            pq.write_table(arrow.cast(schema), handle)
+            pq.write_table(plain.cast(schema), handle)
             return
         import pyarrow.csv as pacsv
 
-        rounded = table.copy()
-        floats = rounded.select_dtypes("float").columns
-        # + 0.0: no "-0" where a small negative value rounds to zero
-        rounded[floats] = rounded[floats].round(CSV_DECIMALS) + 0.0
-        arrow = pa.Table.from_pandas(rounded, preserve_index=False)
         # unquoted, as pandas writes them (Arrow quotes every name); none needs quotes
-        handle.write((",".join(table.columns) + "\n").encode())
+        handle.write((",".join(columns) + "\n").encode())
         options = pacsv.WriteOptions(include_header=False, quoting_style="none")
-        pacsv.write_csv(arrow, handle, options)
+        pacsv.write_csv(arrow(rounded=True), handle, options)
 
     return write
+
+
+def arrow_column(values: np.ndarray) -> Any:
+    """``values`` as an Arrow array, NaN (and None in text) as null. Numbers, flags and text
+    are built from their buffers: ``pyarrow.array`` imports pandas (0.2 s) to look for its
+    types, where a fused table has none; any other column (a summary's mixed objects) goes
+    through it."""
+    import pyarrow as pa
+
+    n = values.size
+    kind = values.dtype.kind
+    if kind == "f":
+        data = np.ascontiguousarray(values, dtype=np.float64)
+        missing = np.isnan(data)
+        nulls = int(missing.sum())
+        validity = pa.py_buffer(np.packbits(~missing, bitorder="little")) if nulls else None
+        return pa.Array.from_buffers(pa.float64(), n, [validity, pa.py_buffer(data)], nulls)
+    if kind in "iu":
+        data = np.ascontiguousarray(values, dtype=np.int64)
+        return pa.Array.from_buffers(pa.int64(), n, [None, pa.py_buffer(data)])
+    if kind == "b":
+        bits = np.packbits(values.astype(bool), bitorder="little")
+        return pa.Array.from_buffers(pa.bool_(), n, [None, pa.py_buffer(bits)])
+    if kind == "U" or (kind == "O" and all(isinstance(v, str) or v is None for v in values)):
+        missing = np.array([v is None for v in values], dtype=bool)
+        encoded = [b"" if v is None else str(v).encode() for v in values]
+        offsets = np.zeros(n + 1, dtype=np.int32)
+        np.cumsum([len(e) for e in encoded], out=offsets[1:])
+        nulls = int(missing.sum())
+        validity = pa.py_buffer(np.packbits(~missing, bitorder="little")) if nulls else None
+        buffers = [validity, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))]
+        return pa.Array.from_buffers(pa.string(), n, buffers, nulls)
+    return pa.array(values, from_pandas=True)
 
 
 def _numeric(kind: Any) -> bool:
@@ -103,6 +148,14 @@ def _numeric(kind: Any) -> bool:
 
 
 def fused_table(run: FuseRun) -> pd.DataFrame:
+    """:func:`fused_columns` as a pandas DataFrame (for the library's :func:`fuse_file`)."""
+    import pandas as pd
+
+    table: pd.DataFrame = pd.DataFrame(fused_columns(run))
+    return table
+
+
+def fused_columns(run: FuseRun) -> dict[str, Any]:
     """One row per tick: time, each sensor's referred height, the fused height, weights, support.
 
     Columns: ``time_s``; ``alt_<sensor>_m`` for each sensor (height above take-off);
@@ -125,11 +178,10 @@ def fused_table(run: FuseRun) -> pd.DataFrame:
     if "support" in res.traces:
         for i, name in enumerate(ref.names):
             columns[f"support_{name}"] = res.traces["support"][:, i]
-    table: pd.DataFrame = pd.DataFrame(columns)
-    return table
+    return columns
 
 
-def weights_table(run: FuseRun) -> pd.DataFrame:
+def weights_columns(run: FuseRun) -> dict[str, Any]:
     """The weight traces: normalised weights and every method-specific trace, per sensor."""
     ref, res = run.referred, run.result
     columns: dict[str, Any] = {"time_s": ref.t}
@@ -139,8 +191,7 @@ def weights_table(run: FuseRun) -> pd.DataFrame:
         for i, name in enumerate(ref.names):
             columns[f"{key}_{name}"] = trace[:, i]
     columns.update(res.tick_traces)
-    table: pd.DataFrame = pd.DataFrame(columns)
-    return table
+    return columns
 
 
 #: ``-o -``: the fused table (CSV) goes to standard output.
@@ -353,13 +404,15 @@ def write_outputs(
         for role, path in outputs.items()
     }
     provenance = dict(run.provenance, outputs=listed)
-    fused = write_table(fused_table(run), table_format(csv_path), provenance)
+    fused = write_table(fused_columns(run), table_format(csv_path), provenance)
     with atomic_outputs() as stage:
         if csv_path != STDOUT:
             stage(csv_path, fused, binary=True)
         if weights_path:
             weights = Path(weights_path)
-            stage(weights, write_table(weights_table(run), table_format(weights), provenance), True)
+            stage(
+                weights, write_table(weights_columns(run), table_format(weights), provenance), True
+            )
         for path, (write, binary) in (extra or {}).items():
             stage(path, write, binary)
         if meta is not None:
