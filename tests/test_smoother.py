@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,11 +23,13 @@ from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import SmootherParams, fuse_smoother
 from altfuse.fuse.smoother.compiled import _forget_other_versions
 from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record
-from altfuse.fuse.smoother.model import OFFSET_PRIOR, STILL_SIGMA, datum_priors
+from altfuse.fuse.smoother.model import OFFSET_PRIOR, STILL_SIGMA, Events, datum_priors
 from altfuse.fuse.smoother.noise import (
+    ACCEL_EM_GAIN,
     Q_AGREEMENT_MIN_SHARE,
     accel_refused,
     accel_spikes,
+    em_accel,
     measurement_sigma,
     terrain_noise,
     wander_bound,
@@ -456,3 +459,22 @@ def test_a_barometer_alone_refuses_an_accelerometer_it_contradicts() -> None:
     assert accel_refused(alone, alone.accel.on_clock)[(t >= 60.5) & (t < 62.5)].min() > 1.0
     res = fuse_smoother(alone, SmootherParams())
     assert np.max(np.abs(res.fused - h)) < 1.0
+
+
+def test_the_acceleration_noise_is_raised_where_the_smoothed_flight_departs_from_it() -> None:
+    """EM's M-step per second: the smoothed velocity gains 1 m/s in the third second that the
+    accelerometer (reading 0.5 m/s^2 throughout, its bias 0.5) does not explain; there the
+    density becomes ACCEL_EM_GAIN * 1^2 / 1 s, elsewhere it keeps the log's own."""
+    t = np.arange(0.0, 5.0, 0.1)
+    v = np.where(t >= 2.5, 1.0, 0.0)
+    x = np.column_stack([np.zeros(t.size), v, np.full(t.size, 0.5)])
+    floor = np.full(t.size, 1e-3)
+    who = np.full(t.size, -1)
+    ev = Events(t, who, np.zeros(t.size), np.full(t.size, 0.5), np.zeros((t.size, 0)),
+                np.zeros(t.size, bool), floor, True, 3.5, 0.0)  # fmt: skip
+    raised = em_accel(ev, {"x": x}, floor).q_accel
+    third = (t >= 2.0 - 1e-9) & (t < 3.0 - 1e-9)
+    np.testing.assert_allclose(raised[third], ACCEL_EM_GAIN * 1.0**2 / 1.0, rtol=1e-9)
+    np.testing.assert_array_equal(raised[~third], floor[~third])
+    # without the accelerometer there is nothing to raise
+    assert em_accel(replace(ev, use_bias=False), {"x": x}, floor).q_accel is floor
