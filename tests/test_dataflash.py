@@ -141,3 +141,19 @@ def test_not_a_log(tmp_path: Path, content: bytes, message: str) -> None:
 def test_missing_file(tmp_path: Path) -> None:
     with pytest.raises(LogReadError, match="no such file"):
         read_log(tmp_path / "nope.bin")
+
+
+def test_the_land_detector_is_read_from_stat() -> None:
+    """ArduPilot's Plane and QuadPlane log their own verdict, STAT.isFlying: the quadplane
+    stands armed on the ground for 6 s of STAT records, then flies to the log's end."""
+    path = shared_log("truth/quadplane_4.6.0dev_yakupabaci_climb65m.BIN")
+    landed = read_log(path).landed
+    assert landed is not None
+    assert landed.source == "STAT.isFlying == 0"
+    m = mavutil.mavlink_connection(str(path))
+    flying = []
+    while (msg := m.recv_match(type="STAT")) is not None:
+        flying.append(msg.isFlying)
+    np.testing.assert_array_equal(landed.value, 1.0 - np.array(flying, dtype=float))
+    assert landed.value[0] == 1.0
+    assert landed.value[-1] == 0.0

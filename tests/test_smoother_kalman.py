@@ -3,10 +3,11 @@
 A linear-Gaussian toy with the smoother's own state layout (height, velocity, accelerometer
 bias, two sensor offsets, a barometer's scale error and drift rate), irregular event times, one
 scalar measurement of either sensor per event or none (a clock tick), the first events on the
-ground (h = 0 and v = 0 held there), no gate: :func:`passes.run` must give filterpy's
-``KalmanFilter.batch_filter`` and ``rts_smoother`` to 1e-9, in the states and in the variances
-it reports (of h at every event, of a sample's own row ``H x``). filterpy's smoother is
-Rauch-Tung-Striebel's, ours the modified Bryson-Frazier form of the same estimate.
+ground (h = 0 and v = 0 held there) and the last landed elsewhere (v = 0 alone), no gate:
+:func:`passes.run` must give filterpy's ``KalmanFilter.batch_filter`` and ``rts_smoother`` to
+1e-9, in the states and in the variances it reports (of h at every event, of a sample's own row
+``H x``). filterpy's smoother is Rauch-Tung-Striebel's, ours the modified Bryson-Frazier form
+of the same estimate.
 """
 
 from __future__ import annotations
@@ -44,9 +45,13 @@ def toy(seed: int, accel: bool) -> tuple[Events, Layout, np.ndarray]:
     a = -3 / 16 * np.sin(t / 4) + rng.normal(0, 0.1, count) if accel else np.zeros(count)
     q_state = np.tile([0.01, 1e-4], (count, 1))
     still = np.zeros(count, dtype=bool)
-    still[:20] = who[:20] == -1  # ticks on the ground
+    still[:20] = who[:20] == -1  # ticks on the ground at the datum
+    landed = np.zeros(count, dtype=bool)
+    landed[-30:] = who[-30:] == -1  # ticks on the ground after landing: v = 0 alone
     q_accel = np.full(count, 0.05)
-    events = Events(t, who, z, a, q_state, still, q_accel, True, np.inf, float(z[who >= 0][0]))
+    events = Events(
+        t, who, z, a, q_state, still, q_accel, True, np.inf, float(z[who >= 0][0]), landed
+    )
     scale = Regressor("scale", 1, np.where(who == 1, truth, 0.0), 0.02)
     layout = Layout(np.ones(M), (scale,), drifting=(1,))
     return events, layout, r
@@ -73,7 +78,8 @@ def filterpy_passes(
         if i == 1:  # the barometer's scale error, times its height
             row[0, 3 + M] = layout.regressors[0].coef[k]
         steps.append((k, f, q, u, row, np.array([ev.z[k]]) if i >= 0 else None, r[k]))
-        for j in (0, 1) if ev.still[k] else ():
+        assert ev.landed is not None
+        for j in (0, 1) if ev.still[k] else (1,) if ev.landed[k] else ():
             hold = np.zeros((1, n))
             hold[0, j] = 1.0
             steps.append((k, np.eye(n), np.zeros((n, n)), np.zeros((2, 1)), hold, np.zeros(1),
@@ -118,6 +124,8 @@ def test_forward_filter_is_filterpys_kalman_filter(seed: int) -> None:
     xf, pf, _, _ = filterpy_passes(ev, layout, r)
     assert ours["accepted"][ev.who >= 0].all()
     assert ev.still.sum() >= 3
+    assert ev.landed is not None
+    assert ev.landed.sum() >= 3
     assert_matches(ours, ev, layout, xf, pf)
 
 

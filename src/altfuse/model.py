@@ -15,7 +15,7 @@ FloatArray = npt.NDArray[np.float64]
 SensorKind = Literal["baro", "gps", "rangefinder"]
 SENSOR_KINDS: tuple[SensorKind, ...] = get_args(SensorKind)
 #: What a series is: an altitude source, or a reference, speed or temperature beside them.
-SeriesKind = Literal[SensorKind, "reference", "speed", "velocity", "temperature"]
+SeriesKind = Literal[SensorKind, "reference", "speed", "velocity", "temperature", "landed"]
 
 
 def sensor_kind(kind: SeriesKind) -> SensorKind:
@@ -185,6 +185,7 @@ class FlightLog:
     ground_speed: Series | None = None  # horizontal speed [m/s], kind "speed"
     vertical_velocity: Series | None = None  # a GPS's vertical velocity up [m/s], "velocity"
     vibration: Vibration | None = None
+    landed: Series | None = None  # the autopilot's own verdict: 1 on the ground, 0 flying
     temperatures: dict[str, Series] = field(default_factory=dict)  # [degC] by sensor name
     # samples of the inputs beside the altitudes (IMU, ATT, ...) dropped by screening, by source
     dropped_inputs: dict[str, int] = field(default_factory=dict)

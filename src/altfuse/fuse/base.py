@@ -63,6 +63,9 @@ class FusionInput:
         Each sensor's span [s] over which its offset was measured standing at the take-off
         point, in ``z``'s order; None where it was not (matched to another sensor, a log
         without a take-off).
+    landed
+        The autopilot's own on-ground verdict (1 on the ground, 0 flying) samples; None if the
+        log has none.
     scale_unknown
         Per sensor, in ``z``'s order: for a barometer whose scale the datum estimated and did not
         apply, that estimate and its standard error (:attr:`altfuse.datum.Offset.scale_unknown`);
@@ -84,6 +87,7 @@ class FusionInput:
     imu_rate_hz: float | None = None
     datum_windows: tuple[tuple[float, float] | None, ...] = ()
     scale_unknown: tuple[tuple[float, float] | None, ...] = ()
+    landed: Samples | None = None
 
     def __post_init__(self) -> None:
         n = self.z.shape[1] if self.z.ndim == 2 else -1

@@ -63,7 +63,7 @@ log = logging.getLogger(__name__)
 _SENSOR_TYPES = ("GPS", "GPS2", "GPS3", "BARO", "BAR2", "BAR3", "RFND", "SONR", "CTUN")
 _OTHER_TYPES = (
     "IMU", "ATT", "XKF1", "NKF1", "ORGN", "AHR2", "POS", "SIM", "MSG", "VER", "FMTU", "PARM",
-    "VIBE",
+    "VIBE", "STAT",
 )  # fmt: skip
 WANTED_TYPES = frozenset(_SENSOR_TYPES + _OTHER_TYPES)
 _UNIT_TYPES = frozenset({"UNIT", "MULT"})  # read with FMTU for the fields' units
@@ -556,6 +556,19 @@ def _read_vibration(rec: _Records) -> Vibration | None:
     )
 
 
+def _read_landed(rec: _Records) -> Series | None:
+    """The autopilot's on-ground verdict: ``STAT.isFlying`` (Plane, QuadPlane, Rover), 1 where
+    it says the vehicle is not flying."""
+    if not rec.timed("STAT", "isFlying"):
+        return None
+    t, flying = rec.times("STAT"), rec.raw("STAT", "isFlying")
+    keep = np.isfinite(t)
+    if not keep.any():
+        return None
+    value = (flying[keep] == 0).astype(np.float64)
+    return Series("landed", "landed", "STAT.isFlying == 0", "on the ground", t[keep], value)
+
+
 def _read_imu(rec: _Records) -> Imu | None:
     if not rec.timed("IMU", "AccX", "AccY", "AccZ"):
         return None
@@ -636,6 +649,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
         ground_speed=speed,
         vertical_velocity=climb,
         vibration=vibration,
+        landed=_read_landed(rec),
         temperatures=b.temperatures,
     )
 

@@ -68,6 +68,7 @@ TOPICS = (
     "vehicle_local_position",
     "vehicle_global_position_groundtruth",
     "vehicle_local_position_groundtruth",
+    "vehicle_land_detected",
 )
 #: ``distance_sensor.orientation`` of a sensor looking down (MAV_SENSOR_ROTATION_PITCH_270).
 DOWNWARD = 25
@@ -169,6 +170,7 @@ def read_ulog(path: str | Path) -> FlightLog:
         params=params,
         ground_speed=sensors.speed,
         vertical_velocity=sensors.climb,
+        landed=_landed(topics),
         temperatures=sensors.temperatures,
         damaged=damaged,
         reader=f"ULog (pyulog {version('pyulog')})",
@@ -345,6 +347,16 @@ def _attitude(topics: _Topics) -> Attitude | None:
     pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
     yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
     return Attitude("vehicle_attitude.q", topics.times(d), roll, pitch, yaw, quaternion=q)
+
+
+def _landed(topics: _Topics) -> Series | None:
+    """PX4's land detector: ``vehicle_land_detected.landed``, 1 on the ground."""
+    found = next((d for d in topics.of("vehicle_land_detected") if "landed" in d), None)
+    if found is None:
+        return None
+    t, value = topics.times(found), (found["landed"] != 0).astype(np.float64)
+    return _series("landed", "landed", "vehicle_land_detected.landed", "on the ground", t, value,
+                   np.ones(t.size, dtype=bool))  # fmt: skip
 
 
 def _references(topics: _Topics) -> list[Series]:

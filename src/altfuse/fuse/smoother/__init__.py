@@ -155,7 +155,13 @@ from altfuse.fuse.smoother.evidence import (
     scale_evidence,
     thermal_evidence,
 )
-from altfuse.fuse.smoother.model import Events, Layout, datum_priors, thermal_regressors
+from altfuse.fuse.smoother.model import (
+    Events,
+    Layout,
+    datum_priors,
+    landed_events,
+    thermal_regressors,
+)
 from altfuse.fuse.smoother.noise import (
     Q_ACCEL_NO_IMU,
     Q_OFFSET,
@@ -245,9 +251,11 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         offset_prior=None if still.any() else datum_priors(samples, inputs.datum_windows),
     )
     q_events, terrain = state_noise(inputs, times, params.offset_noise_m2_s)
+    landed = landed_events(times, who, inputs.landed, inputs.speed) & ~still
     ev = Events(
-        times, who, values, a, q_events, still, q_accel + q_added, use_imu, params.gate_sigma, h0
-    )
+        times, who, values, a, q_events, still, q_accel + q_added, use_imu, params.gate_sigma, h0,
+        landed,
+    )  # fmt: skip
     physical = ev
     if params.offset_noise_m2_s:
         physical = replace(ev, q_state=state_noise(inputs, times, {})[0])
@@ -285,6 +293,8 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         params={
             "model": "accelerometer-driven" if use_imu else "altitude-only random walk (no IMU)",
             "accel_noise_m2_s3": q_accel,
+            # held at v = 0 where the autopilot said it had landed [s]
+            "landed_held_s": float(landed.sum() * inputs.dt_s),
             # where the smoothed flight asked for more than the accelerometer's own noise [s]
             "accel_noise_raised_s": float(
                 np.diff(times, prepend=times[0])[ev.q_accel > floor].sum()

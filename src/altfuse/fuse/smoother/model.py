@@ -36,6 +36,10 @@ DRIFT_PRIOR = 0.01
 Q_DRIFT = 1e-5
 #: How well "standing still at the take-off point" holds on the ground [m, m/s].
 STILL_SIGMA = 0.02
+#: The autopilot's landed verdict is trusted this long [s] inside each of its landed spans, and
+#: while the GPS says the vehicle moves slower than LANDED_MAX_SPEED_M_S [m/s].
+LANDED_MARGIN_S = 2.0
+LANDED_MAX_SPEED_M_S = 1.0
 #: Prior on a sensor's offset from the datum [m], where the flight says nothing better; and the
 #: fewest samples on the ground that say better.
 OFFSET_PRIOR = 1.0
@@ -78,6 +82,37 @@ def datum_priors(
         if there.size < MIN_DATUM_SAMPLES:
             continue
         out[i] = math.hypot(mad_sigma(there) / math.sqrt(there.size), STILL_SIGMA)
+    return out
+
+
+def landed_events(
+    times: FloatArray, who: np.ndarray, landed: Samples | None, speed: Samples | None
+) -> np.ndarray:
+    """The clock ticks at which the vehicle stands on the ground by the autopilot's own land
+    detector (``landed``: PX4's ``vehicle_land_detected``, ArduPilot's ``STAT.isFlying``), each
+    landed span less ``LANDED_MARGIN_S`` at either end (a detector decides with a delay), and
+    not where the GPS says it rolls faster than ``LANDED_MAX_SPEED_M_S`` (a plane taxiing on a
+    sloping field climbs with it). There the smoother holds v = 0."""
+    out = np.zeros(times.size, dtype=bool)
+    if landed is None or landed.t.size == 0:
+        return out
+    order = np.argsort(landed.t, kind="stable")
+    t, on = landed.t[order], landed.value[order] > 0.5
+    # the spans [start, end) over which the verdict is "landed"
+    change = np.flatnonzero(np.diff(on.astype(np.int8))) + 1
+    starts = np.concatenate(([0], change))
+    ends = np.concatenate((change, [t.size]))
+    for a, b in zip(starts, ends, strict=True):
+        if not on[a]:
+            continue
+        lo = t[a] + LANDED_MARGIN_S
+        hi = (t[b] if b < t.size else t[-1]) - LANDED_MARGIN_S
+        out |= (times >= lo) & (times <= hi)
+    out &= who == -1
+    if speed is not None and speed.t.size:
+        order = np.argsort(speed.t, kind="stable")
+        rolling = np.interp(times, speed.t[order], speed.value[order]) > LANDED_MAX_SPEED_M_S
+        out &= ~rolling
     return out
 
 
@@ -207,7 +242,9 @@ class Events:
     acceleration noise density there [m^2/s^3] (the flight's, and what spikes and the sensors'
     refusals add); ``q_state`` (events, m): the
     sensor states' random-walk densities over that interval; ``still``: the events at which the
-    vehicle is known to stand at the take-off point; ``h0``: the first height guess.
+    vehicle is known to stand at the take-off point; ``h0``: the first height guess;
+    ``landed``: the events at which it stands still elsewhere on the ground (v = 0 alone;
+    None: none).
     """
 
     t: FloatArray
@@ -220,6 +257,7 @@ class Events:
     use_bias: bool
     gate: float
     h0: float
+    landed: np.ndarray | None = None
 
 
 @compiled
@@ -264,12 +302,14 @@ def measurement_matrix(layout: Layout, who: np.ndarray) -> FloatArray:
 
 
 @compiled
-def hold_still(x: FloatArray, p: FloatArray, record: FloatArray) -> None:
-    """On the ground before take-off, in place: h = 0 and v = 0 (the datum's definition), as
-    two measurements of variance ``STILL_SIGMA^2``. Each one's ``P H'``, ``S`` and innovation go
-    into a row of ``record`` (2, n + 2), for the smoother's backward pass."""
+def hold_still(x: FloatArray, p: FloatArray, record: FloatArray, at_datum: bool) -> None:
+    """Standing on the ground, in place: v = 0, and at the datum (``at_datum``: before take-off)
+    h = 0 too (the datum's definition), as measurements of variance ``STILL_SIGMA^2``. Each
+    one's ``P H'``, ``S`` and innovation go into a row of ``record`` (2, n + 2), for the
+    smoother's backward pass; ``S`` 0 where there was none (h, away from the datum)."""
     n = x.size
-    for j in (0, 1):
+    record[0, n] = 0.0
+    for j in range(0 if at_datum else 1, 2):
         row = np.zeros(n)
         row[j] = 1.0
         ph = record[j, :n]

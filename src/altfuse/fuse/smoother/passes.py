@@ -49,13 +49,14 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
     """
     measured = _measured(ev, r, layout)
     dynamics = _dynamics(ev, layout)
-    still = ev.still.astype(np.bool_)
+    ground = _ground(ev)
     xf, pf, updates, holds, gain_h, accepted, loglik, nu = _forward(
-        measured, dynamics, still, ev.gate, prior(ev, layout), True
+        measured, dynamics, ground, ev.gate, prior(ev, layout), True
     )
     h, who = measured[4], measured[1]
     if smooth:
-        var_h, var_row = _backward(ev.t, (xf, pf, updates, holds, still), (who, h), dynamics)
+        held = ground[0] | ground[1]
+        var_h, var_row = _backward(ev.t, (xf, pf, updates, holds, held), (who, h), dynamics)
     else:
         var_h = pf[:, 0, 0].copy()
         var_row = np.where(who >= 0, np.einsum("ki,kij,kj->k", h, pf, h), np.nan)
@@ -73,7 +74,7 @@ def likelihood(ev: Events, r: FloatArray, layout: Layout) -> dict[str, np.ndarra
     last, _, _, _, _, accepted, loglik, _ = _forward(
         _measured(ev, r, layout),
         _dynamics(ev, layout),
-        ev.still.astype(np.bool_),
+        _ground(ev),
         ev.gate,
         prior(ev, layout),
         False,
@@ -87,6 +88,14 @@ def _measured(
     """The events' times, series, values, variances and rows of H, as the kernels take them."""
     h = measurement_matrix(layout, ev.who)
     return ev.t, ev.who.astype(np.int64), ev.z, np.asarray(r, dtype=np.float64), h
+
+
+def _ground(ev: Events) -> tuple[np.ndarray, np.ndarray]:
+    """The events held on the ground, as the kernels take them: at the datum (h = 0, v = 0),
+    and elsewhere standing (v = 0)."""
+    still = ev.still.astype(np.bool_)
+    landed = np.zeros_like(still) if ev.landed is None else ev.landed.astype(np.bool_) & ~still
+    return still, landed
 
 
 def _dynamics(
@@ -104,7 +113,7 @@ def _dynamics(
 def _forward(
     measured: tuple[FloatArray, np.ndarray, FloatArray, FloatArray, FloatArray],
     dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray],
-    still: np.ndarray,
+    ground: tuple[np.ndarray, np.ndarray],
     gate: float,
     start: tuple[FloatArray, FloatArray],
     keep: bool,
@@ -113,7 +122,7 @@ def _forward(
 ]:
     """The forward filter: each event's posterior state and covariance; what the backward pass
     needs of its updates (per event: the sample's ``P H'``, ``S`` and innovation, ``S`` 0 where
-    it was not fused; per event on the ground: the same of its two holds); each sample's gain
+    it was not fused; per event held on the ground: the same of its holds); each sample's gain
     on h, whether it passed the gate, its log-likelihood and its normalised innovation
     ``y / sqrt(S)``.
 
@@ -121,18 +130,20 @@ def _forward(
     ``dynamics``: the mean acceleration over the interval ending at each event, the white
     acceleration density there, the sensor states' densities, the drifting offsets' (offset,
     rate) state pairs, whether the bias is a state and F's entries off its diagonal;
-    ``start``: the prior; ``keep``: whether to keep the states, covariances and updates (else
-    one slot, overwritten).
+    ``ground``: the events held at the datum (h = 0 and v = 0) and standing elsewhere on the
+    ground (v = 0); ``start``: the prior; ``keep``: whether to keep the states, covariances
+    and updates (else one slot, overwritten).
     """
     t, who, z, r, h = measured
     a, q_accel, q_state, drifts, use_bias, links = dynamics
+    still, landed = ground
     x, p = start[0].copy(), start[1].copy()
     count, n = h.shape
     kept = count if keep else 1
     sensor_accepted = np.full(n, np.nan)  # per state: its sensor's last accepted sample [s]
     sensor_r = np.full(n, np.inf)  # ... and that sample's variance
     refused = np.full((n, 2), np.nan)  # per state: its sensor's last rejection [s] and side
-    xf, pf, updates, holds = _kept(kept, n, int(still.sum()) if keep else 1)
+    xf, pf, updates, holds = _kept(kept, n, int((still | landed).sum()) if keep else 1)
     gain_h, accepted, loglik, nu = (
         np.zeros(count),
         np.zeros(count, dtype=np.bool_),
@@ -177,8 +188,8 @@ def _forward(
             sensor_r[3 + i] = r[k]
             # log N(y; 0, S)
             loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
-        if still[k]:
-            hold_still(x, p, holds[held if keep else 0])
+        if still[k] or landed[k]:
+            hold_still(x, p, holds[held if keep else 0], still[k])
             held += 1
         xf[slot], pf[slot] = x, p
     return xf, pf, updates, holds, gain_h, accepted, loglik, nu
@@ -252,7 +263,7 @@ def _backward(
     at every event and of each sample's own row ``H x`` (NaN at a tick).
 
     ``filtered``: :func:`_forward`'s states, covariances, updates and holds, and which events
-    are on the ground; ``rows``: the events' series and rows of H. The covariances are left
+    were held on the ground; ``rows``: the events' series and rows of H. The covariances are left
     filtered: only the variances asked for are made of the smoothed ones."""
     xs, pf, updates, holds, still = filtered
     who, h = rows
@@ -266,7 +277,7 @@ def _backward(
     unit[0, 0] = unit[1, 1] = 1.0
     var_h = np.zeros(count)
     var_row = np.full(count, np.nan)
-    held = holds.shape[0] if still.any() else 0
+    held = holds.shape[0] if still.any() else 0  # ``still``: the events held, at the datum or not
     for k in range(count - 1, -1, -1):
         p = pf[k]
         # smoothed at k: x_s = x - P lambda;  var = H P H' - (P H')' Lambda (P H')
@@ -283,7 +294,8 @@ def _backward(
             held -= 1
             for j in (1, 0):
                 record = holds[held, j]
-                adjoint_update(adjoint, unit[j], (record[:n], record[n], record[n + 1]), work)
+                if record[n] > 0.0:  # S 0: no hold of this state here
+                    adjoint_update(adjoint, unit[j], (record[:n], record[n], record[n + 1]), work)
         if updates[k, n] > 0.0:
             record = updates[k]
             adjoint_update(adjoint, h[k], (record[:n], record[n], record[n + 1]), work)
