@@ -9,7 +9,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from altfuse.fuse.smoother.model import Events, Layout, scale_regressors, scales_agree
+from altfuse.fuse.smoother.model import (
+    Events,
+    Layout,
+    scale_regressors,
+    scales_agree,
+    scales_to_learn,
+)
 from altfuse.fuse.smoother.passes import likelihood, run
 from altfuse.model import FloatArray
 
@@ -67,7 +73,7 @@ def scale_evidence(
     with the scale 0.94, RMSE 0.013 -> 0.005 m). Made with the offsets' physical random walks
     (``physical``), as :func:`thermal_evidence`.
     """
-    if not scale_regressors(physical.who, physical.t, unknown):
+    if not scales_to_learn(unknown):
         return layout, math.nan
     without = run(physical, r, layout)
     richer = layout.adding(scale_regressors(physical.who, without["x"][:, 0], unknown))

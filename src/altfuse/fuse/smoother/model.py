@@ -146,9 +146,14 @@ def scale_regressors(
     the scale: the measurement is linear in ``s`` given it), prior ``SCALE_PRIOR``."""
     return [
         Regressor("scale", i, np.where(who == i, h, 0.0), SCALE_PRIOR)
-        for i, known in enumerate(unknown)
-        if known is not None and known[1] <= SCALE_PRIOR
+        for i in scales_to_learn(unknown)
     ]
+
+
+def scales_to_learn(unknown: Sequence[tuple[float, float] | None]) -> list[int]:
+    """The barometers whose scale the datum estimated to within SCALE_PRIOR and did not apply
+    (``unknown``, per sensor: the estimate and its error, or None)."""
+    return [i for i, known in enumerate(unknown) if known is not None and known[1] <= SCALE_PRIOR]
 
 
 def scales_agree(

@@ -265,7 +265,7 @@ def _backward(
     ``filtered``: :func:`_forward`'s states, covariances, updates and holds, and which events
     were held on the ground; ``rows``: the events' series and rows of H. The covariances are left
     filtered: only the variances asked for are made of the smoothed ones."""
-    xs, pf, updates, holds, still = filtered
+    xs, pf, updates, holds, held_at = filtered
     who, h = rows
     _, _, _, drifts, use_bias, links = dynamics
     count, n = xs.shape
@@ -277,7 +277,7 @@ def _backward(
     unit[0, 0] = unit[1, 1] = 1.0
     var_h = np.zeros(count)
     var_row = np.full(count, np.nan)
-    held = holds.shape[0] if still.any() else 0  # ``still``: the events held, at the datum or not
+    held = holds.shape[0] if held_at.any() else 0
     for k in range(count - 1, -1, -1):
         p = pf[k]
         # smoothed at k: x_s = x - P lambda;  var = H P H' - (P H')' Lambda (P H')
@@ -290,7 +290,7 @@ def _backward(
                 total += p[i, j] * lam[j]
             xs[k, i] -= total
         # back through the event's updates, last first: its holds, then its sample
-        if still[k]:
+        if held_at[k]:
             held -= 1
             for j in (1, 0):
                 record = holds[held, j]
