@@ -114,12 +114,13 @@ check reads 0.1-1.3 where the +-2 sigma coverage runs from 0.63 to 1.00).
 Measured (``benchmarks/smoother_accuracy.py``, 159 simulated flights): the lowest RMSE of all
 methods on 157, within 10 % of the best on 158 (not on Paper A's flight with seed 1 and an
 attitude error: 0.479 m against the mean's 0.400; the hover with seed 3 and its barometer
-drifting, 1.391 m against multilayer's 1.313); 95.2 % of the true errors within +-2
+drifting, 1.391 m against multilayer's 1.313); 95.0 % of the true errors within +-2
 ``fused_std`` over all, 0.18 to 1.00 per flight. On the simulators' 13 truth logs
 (``benchmarks/truth_accuracy.py``, README "Accuracy"): RMSE and maximum error within the
-project's bar on all 13; the coverage within 0.90-0.99 on 8 (0.63-0.88 on four, 0.999 on the
+project's bar on all 13; the coverage within 0.90-0.99 on 9 (0.62-0.86 on three, 0.998 on the
 Solo's: where the default offset random walks leave a slow error of one sensor unseen, or a
-sensor's latency, 4-12 ms against the simulator's truth, turns a climb into centimetres).
+sensor's latency, 4-10 ms against the simulator's truth and not found against the
+accelerometer, turns a climb into centimetres).
 Where GPS and barometer are alone through Paper A's
 excursion, part of it is followed and ``fused_std`` is too small.
 
