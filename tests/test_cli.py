@@ -231,6 +231,31 @@ def test_skipped_bytes_are_one_warning_line(tmp_path: Path) -> None:
     ]
 
 
+def test_a_failed_model_check_is_one_warning_line(tmp_path: Path) -> None:
+    # a PX4 log whose GPS is up to 2 m off its EKF within 6 s: its innovations average 8x
+    # what the smoother's noises say, so its fused_std is too small, and the user is told
+    log = shared_log("px4/pyulog_sample_log_small.ulg")
+    result = run("fuse", log, "-o", tmp_path / "o.csv")
+    assert result.exit_code == 0, result.output
+    warned = [line for line in result.stderr.splitlines() if "model check" in line]
+    assert len(warned) == 1
+    assert warned[0].startswith(
+        "altfuse: warning: pyulog_sample_log_small.ulg: smoother's model check failed: mean "
+        "squared normalised innovation gps "
+    )
+    meta = json.loads((tmp_path / "o.meta.json").read_text())
+    assert meta["parameters"]["model_check"].startswith("failed: ")
+    # the method that has no such check says nothing of it
+    result = run("fuse", log, "-o", tmp_path / "m.csv", "-m", "mean")
+    assert result.exit_code == 0, result.output
+    assert "model check" not in result.stderr
+    report = run("evaluate", log, "--methods", "mean,smoother")
+    assert report.exit_code == 0, report.output
+    checks = [line for line in report.stdout.splitlines() if line.startswith("model check")]
+    assert len(checks) == 1
+    assert checks[0].startswith("model check: smoother failed: mean squared normalised ")
+
+
 def test_info_text_and_json() -> None:
     result = run("info", SAMPLE_LOG)
     assert result.exit_code == 0

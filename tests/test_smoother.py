@@ -20,7 +20,7 @@ from accuracy import verdict
 from altfuse.cli import cli
 from altfuse.evaluation import evaluate
 from altfuse.fuse import FusionInput
-from altfuse.fuse.smoother import SmootherParams, fuse_smoother
+from altfuse.fuse.smoother import NIS_CHECK, SmootherParams, fuse_smoother, model_check
 from altfuse.fuse.smoother.compiled import _forget_other_versions
 from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record
 from altfuse.fuse.smoother.model import OFFSET_PRIOR, STILL_SIGMA, Events, datum_priors
@@ -478,3 +478,10 @@ def test_the_acceleration_noise_is_raised_where_the_smoothed_flight_departs_from
     np.testing.assert_array_equal(raised[~third], floor[~third])
     # without the accelerometer there is nothing to raise
     assert em_accel(replace(ev, use_bias=False), {"x": x}, floor).q_accel is floor
+
+
+def test_the_model_check_fails_on_the_sensors_beyond_twice_their_variance() -> None:
+    assert model_check({"nis_gps": 0.2, "nis_baro": NIS_CHECK}) == "passed"
+    verdict = model_check({"nis_gps": 5.09, "nis_gps2": 1.0, "nis_baro": 2.5})
+    assert verdict.startswith("failed: mean squared normalised innovation gps 5.09, baro 2.50 ")
+    assert "gps2" not in verdict

@@ -34,7 +34,7 @@ OUTCOMES = {
     "px4ulogrs_esc_status_log.ulg": ("ok", None),
     "px4ulogrs_quadrotor_local.ulg": ("refused", "926 fix_type < 3"),
     "pyulog_sample_appended_multiple.ulg": ("refused", "1 usable altitude source (baro)"),
-    "pyulog_sample_log_small.ulg": ("ok", None),
+    "pyulog_sample_log_small.ulg": ("ok", "smoother's model check failed"),
     "pyulog_sample_logging_tagged_and_default_params.ulg": ("ok", None),
     "pyulog_sample_px4_events.ulg": ("ok", None),
 }

@@ -133,6 +133,7 @@ class LogResult:
     fused_share: float | None = None  # of the ticks, those with a fused value
     diverged: int = 0  # ticks whose fused value left every sensor (altfuse.guard)
     max_excursion_m: float | None = None  # the largest gap from the fused value to a sensor
+    model_check: str = ""  # the smoother's check of its own noises: passed, or why not
     truth: str = ""
     metrics: dict[str, float | None] = field(default_factory=dict)
 
@@ -170,6 +171,7 @@ def _described(name: str, done: FileRun, seconds: float) -> LogResult:
         fused_share=round(valued / ticks, 4),
         diverged=int(guarded["diverged_ticks"]),
         max_excursion_m=guarded["max_excursion_m"],
+        model_check=str(run.result.params.get("model_check", "")),
         truth=label,
         metrics=metrics,
     )

@@ -28,7 +28,7 @@ from altfuse.batch import (
     run_batch,
     summary_name,
 )
-from altfuse.evaluation import TRUTHS, TruthChoice, evaluation_table
+from altfuse.evaluation import TRUTHS, Evaluation, TruthChoice, evaluation_table
 from altfuse.evaluation import evaluate as evaluate_log
 from altfuse.fuse import DEFAULT_METHOD, METHODS, params_by_method
 from altfuse.info import as_text, damage, describe
@@ -322,6 +322,9 @@ def fuse(
             "%s: %s left every sensor on %d ticks (by up to %.1f m%s): status 'diverged'",
             log.name, method, record["diverged_ticks"], record["max_excursion_m"], lost,
         )  # fmt: skip
+    check = run.result.params.get("model_check", "passed")
+    if check != "passed":
+        logging.getLogger("altfuse").warning("%s: %s's model check %s", log.name, method, check)
     counts = run.provenance["status_counts"]
     sidecar = done.written.get("meta", "none")
     click.echo(
@@ -459,13 +462,8 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
         if label:
             click.echo(f"segment {label}:")
         click.echo("\n".join(lines[k * n : (k + 1) * n]))
-    for method, why in result.failed.items():
-        click.echo(f"not run: {method}: {why}")
-    for method, found in result.diverged().items():
-        click.echo(
-            f"diverged: {method} left every sensor on {found['diverged_ticks']} ticks "
-            f"(by up to {found['max_excursion_m']:.1f} m)"
-        )
+    for line in _verdicts(result):
+        click.echo(line)
     with atomic_outputs() as stage:
         if json_path is not None:
             stage(json_path, write_json(result.as_dict()))
@@ -477,6 +475,19 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
             title = f"{log.name}: {', '.join(fused)} (weights: {best}, the lowest RMSE)"
             fig = run_figure(result.runs[best], fused, result.truth, title)
             stage(plot_path, writer(fig, plot_path), binary=True)
+
+
+def _verdicts(result: Evaluation) -> list[str]:
+    """What the table does not say: the methods not run, those that diverged, and those whose
+    own model check failed."""
+    lines = [f"not run: {method}: {why}" for method, why in result.failed.items()]
+    lines += [
+        f"diverged: {method} left every sensor on {found['diverged_ticks']} ticks "
+        f"(by up to {found['max_excursion_m']:.1f} m)"
+        for method, found in result.diverged().items()
+    ]
+    checks = {m: r.result.params.get("model_check", "passed") for m, r in result.runs.items()}
+    return lines + [f"model check: {m} {c}" for m, c in checks.items() if c != "passed"]
 
 
 class _Progress:
