@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from altfuse.fuse.base import DIVERGED, FusionInput, FusionResult
-from altfuse.metrics import envelope, white_noise_sigma
+from altfuse.metrics import envelope, runs, white_noise_sigma
 from altfuse.model import FloatArray
 
 #: An excursion below this [m] is never a divergence, however quiet the sensors.
@@ -68,7 +68,7 @@ def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
     beyond = np.nan_to_num(away) > limit
     long_enough = max(1, round(MIN_S / inputs.dt_s))
     gross = np.nan_to_num(away) > GROSS_M
-    spans = [(a, b) for a, b in _runs(beyond) if b - a >= long_enough or gross[a:b].any()]
+    spans = [(a, b) for a, b in runs(beyond) if b - a >= long_enough or gross[a:b].any()]
     lost = np.isfinite(z).any(axis=1) & ~np.isfinite(fused)
     flagged = lost.copy()
     for a, b in spans:
@@ -94,9 +94,3 @@ def _edge_sensor(fused: FloatArray, z: FloatArray) -> np.ndarray:
     distance = np.where(np.isfinite(z), np.abs(z - fused[:, None]), np.inf)
     nearest = np.argmin(distance, axis=1)
     return np.where(np.isfinite(distance.min(axis=1)), nearest, -1)
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """The runs of ``mask`` as (start, stop) index pairs."""
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
-    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]

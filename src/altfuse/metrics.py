@@ -105,3 +105,9 @@ def error_stats(
         max_abs=float(np.max(np.abs(e))),
         bias=float(np.mean(e)),
     )
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The runs of True in ``mask`` as (start, stop) index pairs, stop exclusive."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]

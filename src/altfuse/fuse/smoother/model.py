@@ -13,7 +13,7 @@ import numpy as np
 
 from altfuse.fuse.smoother.compiled import compiled
 from altfuse.fuse.smoother.kalman import innovation, update
-from altfuse.metrics import mad_sigma
+from altfuse.metrics import mad_sigma, runs
 from altfuse.model import FloatArray, Samples
 
 #: Accelerometer bias random walk [m^2/s^5].
@@ -105,13 +105,7 @@ def landed_events(
         return out
     order = np.argsort(landed.t, kind="stable")
     t, on = landed.t[order], landed.value[order] > 0.5
-    # the spans [start, end) over which the verdict is "landed"
-    change = np.flatnonzero(np.diff(on.astype(np.int8))) + 1
-    starts = np.concatenate(([0], change))
-    ends = np.concatenate((change, [t.size]))
-    for a, b in zip(starts, ends, strict=True):
-        if not on[a]:
-            continue
+    for a, b in runs(on):  # the spans [start, end) over which the verdict is "landed"
         lo = t[a] + LANDED_MARGIN_S
         hi = (t[b] if b < t.size else t[-1]) - LANDED_MARGIN_S
         out |= (times >= lo) & (times <= hi)
@@ -255,8 +249,8 @@ class Events:
     refusals add); ``q_state`` (events, m): the
     sensor states' random-walk densities over that interval; ``still``: the events at which the
     vehicle is known to stand at the take-off point; ``h0``: the first height guess;
-    ``landed``: the events at which it stands still elsewhere on the ground (v = 0 alone;
-    None: none).
+    ``landed``: the events at which it stands still elsewhere on the ground, none of
+    ``still`` (v = 0 alone; None: none).
     """
 
     t: FloatArray

@@ -94,7 +94,7 @@ def _ground(ev: Events) -> tuple[np.ndarray, np.ndarray]:
     """The events held on the ground, as the kernels take them: at the datum (h = 0, v = 0),
     and elsewhere standing (v = 0)."""
     still = ev.still.astype(np.bool_)
-    landed = np.zeros_like(still) if ev.landed is None else ev.landed.astype(np.bool_) & ~still
+    landed = np.zeros_like(still) if ev.landed is None else ev.landed.astype(np.bool_)
     return still, landed
 
 
