@@ -4,7 +4,9 @@ A scenario gives the truth (height above take-off, distance flown, attitude) and
 sensor is when; shared sensor models turn it into the records an ArduPilot log holds:
 
 - GPS, 5 Hz, altitude AMSL (home at ``HOME_AMSL_M``), 0.2 s lag, white noise plus a slow random
-  walk; no fix (Status 1, altitude 12 m off) for its first 3 s.
+  walk; no fix (Status 1, altitude 12 m off) for its first 3 s. Its vertical velocity (``VZ``,
+  down) with the same lag (a receiver reports both for one epoch; ArduPilot's EKF3 applies one
+  ``EK3_GPS_DELAY`` to both) and ``GPS_VZ_SIGMA_M_S`` of white noise.
 - Barometer, 20 Hz, 0.08 m noise, drifting with its temperature (logged in ``BARO.Temp``): the
   board warms from 25 °C towards 35 °C with a 60 s time constant, 0.12 m per °C.
 - Rangefinder, 20 Hz, distance along the body's down axis to the ground, 0.25 m mount height;
@@ -51,6 +53,7 @@ HOME_LAT, HOME_LNG = -35.363261, 149.165230  # ArduPilot's simulator home
 GPS_WEEK, GPS_MS_OF_WEEK = 2400, 200_000_000
 BOOT_S = 30.0  # the log's clock starts at boot; the simulated flight starts this much later
 DT_S = 0.01  # truth clock
+GPS_VZ_SIGMA_M_S = 0.1  # a receiver's vertical velocity noise (u-blox: 0.05-0.3 m/s)
 RANGEFINDER_MIN_M = 0.2
 RANGEFINDER_MOUNT_M = 0.25
 
@@ -351,6 +354,8 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     # GPS time (week and ms of week) once fixed, 0 before, as receivers report it
     gms = np.where(fix, GPS_MS_OF_WEEK + np.round((BOOT_S + ts) * 1000), 0)
     climb = np.gradient(p.height_m, DT_S)
+    # the velocity's noise from its own stream: every other sensor's draw stays as it was
+    climb_noise = np.random.default_rng((seed, 1)).normal(0.0, GPS_VZ_SIGMA_M_S, ts.size)
     log(
         "GPS",
         ts,
@@ -365,7 +370,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         alt,
         truth(ts, np.abs(np.gradient(p.distance_m, DT_S))),
         0.0,
-        -truth(ts, climb),
+        -(truth(ts, climb, lag_s=0.2) + climb_noise),
         0.0,
         1,
     )
