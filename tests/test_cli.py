@@ -219,13 +219,17 @@ def test_single_source_log_with_min_sensors_one(tmp_path: Path) -> None:
     result = run("fuse", log, "-o", out, "--min-sensors", "1")
     assert result.exit_code == 0, result.output
     table = pd.read_csv(out)
-    assert set(table.status.dropna()) <= {"single", "none"}
+    # one sensor is never "fused"; where the smoother leaves it (its GPS velocity says level
+    # flight where its heights sink 5 m, and the autopilot's EKF agrees) it says so
+    assert "single" in set(table.status)
+    assert set(table.status.dropna()) <= {"single", "none", "diverged"}
 
 
 def test_skipped_bytes_are_one_warning_line(tmp_path: Path) -> None:
     result = run("fuse", shared_log("ardupilot/rima48_test_cascade.BIN"), "-o", tmp_path / "o.csv")
     assert result.exit_code == 0
-    assert result.stderr.strip().splitlines() == [
+    skipped = [line for line in result.stderr.splitlines() if "skipped" in line]
+    assert skipped == [
         "altfuse: warning: rima48_test_cascade.BIN: 50723 bytes skipped (not part of any "
         "decodable record)"
     ]

@@ -9,20 +9,28 @@ import numpy as np
 
 from altfuse.model import FloatArray, Samples
 
+#: The series of an event that is no height sample: a clock tick, a GPS's vertical velocity.
+TICK = -1
+VELOCITY = -2
+
 
 def merge_events(
-    samples: Sequence[Samples], ticks: FloatArray
+    samples: Sequence[Samples], ticks: FloatArray, velocity: Samples | None = None
 ) -> tuple[FloatArray, np.ndarray, FloatArray, np.ndarray]:
-    """All sample and tick times in order: (time, sensor index or -1 for a tick, value, and
-    each event's position in its sensor's samples)."""
-    times = [ticks] + [s[0] for s in samples]
-    which = [np.full(ticks.size, -1)] + [np.full(s[0].size, i) for i, s in enumerate(samples)]
-    values = [np.full(ticks.size, np.nan)] + [s[1] for s in samples]
-    position = [np.arange(ticks.size)] + [np.arange(s[0].size) for s in samples]
+    """All sample and tick times in order: (time, sensor index, TICK for a tick or VELOCITY for
+    a vertical-velocity sample, value, and each event's position in its series)."""
+    series = [(TICK, Samples(ticks, np.full(ticks.size, np.nan)))]
+    series += list(enumerate(samples))
+    if velocity is not None:
+        series.append((VELOCITY, velocity))
+    times = [s.t for _, s in series]
+    which = [np.full(s.t.size, i) for i, s in series]
+    values = [s.value for _, s in series]
+    position = [np.arange(s.t.size) for _, s in series]
     t = np.concatenate(times)
     who = np.concatenate(which)
     # at equal times the tick comes last: it reports the state after its instant's samples
-    order = np.lexsort((who == -1, t))
+    order = np.lexsort((who == TICK, t))
     return t[order], who[order], np.concatenate(values)[order], np.concatenate(position)[order]
 
 

@@ -12,6 +12,7 @@ from typing import Literal
 import numpy as np
 
 from altfuse.fuse.smoother.compiled import compiled
+from altfuse.fuse.smoother.events import VELOCITY
 from altfuse.fuse.smoother.kalman import innovation, update
 from altfuse.metrics import mad_sigma, runs
 from altfuse.model import FloatArray, Samples
@@ -64,7 +65,7 @@ class Regressor:
     scale error of 1, a PX4 log 0.006 -> 1.03 m; a sensor's lag, ``coef`` minus the velocity,
     quadplane 0.026 -> 0.195 m.)"""
 
-    name: Literal["thermal", "scale"]
+    name: Literal["thermal", "scale", "lag"]
     sensor: int
     coef: FloatArray  # per event; read at the sensor's own samples only
     prior: float
@@ -295,12 +296,13 @@ def process_noise(
 
 def measurement_matrix(layout: Layout, who: np.ndarray) -> FloatArray:
     """H of every event (events, n): for a sample of sensor ``i``, h plus the sensor's offset
-    (GPS, baro) or minus its ground height (rangefinder), plus its regressors' terms; 0 for a
-    tick."""
+    (GPS, baro) or minus its ground height (rangefinder), plus its regressors' terms; v for a
+    vertical-velocity sample; 0 for a tick."""
     h = np.zeros((who.size, layout.n))
     sample = who >= 0
     h[sample, 0] = 1.0
     h[sample, 3 + who[sample]] = layout.sign[who[sample]]
+    h[who == VELOCITY, 1] = 1.0
     for j, reg in enumerate(layout.regressors):
         mine = who == reg.sensor
         h[mine, layout.index(j)] = reg.coef[mine]

@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from altfuse.fuse.base import FusionInput
-from altfuse.fuse.smoother.events import interval_mean
+from altfuse.fuse.smoother.events import VELOCITY, interval_mean
 from altfuse.fuse.smoother.model import Events, Layout
 from altfuse.metrics import (
     MAD_TO_SIGMA,
@@ -66,6 +66,9 @@ ACCEL_EM_GAIN = 2.0
 #: Window [s] of the local measurement-noise estimate.
 NOISE_WINDOW_S = 5.0
 _MIN_SIGMA_M = 0.01
+#: A GPS's vertical velocity noise floor [m/s]: its errors are correlated over a second or so,
+#: which the spread between samples does not show (ArduPilot's EK3_VELD_M_NSE: 0.5).
+MIN_SIGMA_VELOCITY_M_S = 0.1
 
 
 def measurement_sigma(z: FloatArray) -> float:
@@ -107,7 +110,7 @@ def accel_spikes(t: FloatArray, a: FloatArray) -> FloatArray:
     return np.asarray(excess**2 * np.maximum(dt, 0.0))
 
 
-def _slope(t: FloatArray, z: FloatArray, width: int) -> tuple[FloatArray, FloatArray]:
+def slope(t: FloatArray, z: FloatArray, width: int) -> tuple[FloatArray, FloatArray]:
     """The least-squares slope of ``z`` over a centred window of ``width`` ticks at each tick,
     and the window's ``sum (t - mean t)^2`` (the slope's error is ``sigma / sqrt`` of it); NaN
     where fewer than 4 samples are valid."""
@@ -160,7 +163,7 @@ def accel_refused(inputs: FusionInput, a: FloatArray) -> FloatArray:
         if valid.sum() < 10:
             continue
         sigma = white_noise_sigma(z[valid, i])
-        d, sxx = _slope(t, z[:, i] - h_accel, width)
+        d, sxx = slope(t, z[:, i] - h_accel, width)
         r = d[span:] - d[:-span]
         bound = CHECK_SIGMAS * sigma * np.sqrt(1 / sxx[span:] + 1 / sxx[:-span]) + CHECK_FLOOR_M_S
         # NaN: the sensor has no vote there (too few samples around either end)
@@ -312,32 +315,49 @@ def state_noise(
 
 @dataclass(frozen=True)
 class Noise:
-    """Each event's measurement variance as ``base * scale[sensor]``: ``base`` the local noise
-    of its sensor squared, ``scale`` refined by EM except for the sensors in ``fixed``."""
+    """Each event's measurement variance as ``base * scale[series]``, at least ``floor``:
+    ``base`` the local noise of its series squared, ``scale`` refined by EM except for the
+    sensors in ``fixed``, one entry per sensor, then the vertical velocity's; ``floor`` per
+    event."""
 
     base: FloatArray
     scale: FloatArray
     fixed: np.ndarray
+    floor: FloatArray
+
+    def series(self, who: np.ndarray) -> np.ndarray:
+        """Each event's entry in ``scale``: its sensor's, the velocity's last (a tick: 0)."""
+        return np.where(who == VELOCITY, self.scale.size - 1, np.maximum(who, 0))
 
     def r(self, who: np.ndarray) -> FloatArray:
-        r: FloatArray = self.base * self.scale[np.maximum(who, 0)]
+        r: FloatArray = np.maximum(self.base * self.scale[self.series(who)], self.floor)
         return r
 
 
 def measurement_noise(
-    inputs: FusionInput, given: Mapping[str, float], who: np.ndarray, position: np.ndarray
+    inputs: FusionInput,
+    given: Mapping[str, float],
+    events: tuple[np.ndarray, np.ndarray],
+    velocity: Samples | None,
 ) -> Noise:
-    """Each sample's variance: the local noise of its sensor (or ``given``), scale 1."""
+    """Each sample's variance: the local noise of its sensor (or ``given``), or of the vertical
+    velocity ``velocity`` (at least MIN_SIGMA_VELOCITY_M_S, whatever EM finds); scale 1.
+    ``events``: each event's series and its position in it (:func:`.events.merge_events`)."""
+    who, position = events
     local = [
         np.full(s.value.size, given[name]) if name in given else local_sigma(*s)
         for name, s in zip(inputs.names, inputs.samples, strict=True)
     ]
+    series = list(enumerate(local))
+    if velocity is not None:
+        series.append((VELOCITY, local_sigma(*velocity)))
     base = np.ones(who.size)
-    for i in range(len(inputs.samples)):
+    for i, sigma in series:
         mine = who == i
-        base[mine] = local[i][position[mine]] ** 2
-    fixed = np.array([name in given for name in inputs.names])
-    return Noise(base, np.ones(len(inputs.samples)), fixed)
+        base[mine] = sigma[position[mine]] ** 2
+    fixed = np.array([name in given for name in inputs.names] + [False])
+    floor = np.where(who == VELOCITY, MIN_SIGMA_VELOCITY_M_S**2, 0.0)
+    return Noise(base, np.ones(len(inputs.samples) + 1), fixed, floor)
 
 
 def em_accel(ev: Events, out: dict[str, np.ndarray], floor: FloatArray) -> Events:
@@ -362,21 +382,24 @@ def em_accel(ev: Events, out: dict[str, np.ndarray], floor: FloatArray) -> Event
 
 
 def em_scale(ev: Events, layout: Layout, noise: Noise, out: dict[str, np.ndarray]) -> None:
-    """EM, M-step: each sensor's noise scale from the smoothed residuals (in place)."""
+    """EM, M-step: each series' noise scale from the smoothed residuals (in place)."""
     xs = out["x"]
     sign = layout.sign
-    for i in range(sign.size):
+    for i in [*range(sign.size), VELOCITY]:
         mine = (ev.who == i) & out["accepted"]
-        if noise.fixed[i] or not mine.any():
+        entry = int(noise.series(np.array([i]))[0])
+        if noise.fixed[entry] or not mine.any():
             continue
-        # the measurement model's rows at these events: coefficients on (h, c_i, regressors)
+        # the measurement model's rows at these events: coefficients on (h, c_i) or on v,
+        # and on the series' regressors
         regs = layout.of_sensor(i)
-        cols = [0, 3 + i] + [state for state, _ in regs]
+        own = [(1, 1.0)] if i == VELOCITY else [(0, 1.0), (3 + i, sign[i])]
+        cols = [c for c, _ in own] + [state for state, _ in regs]
         coef = np.column_stack(
-            [np.ones(mine.sum()), np.full(mine.sum(), sign[i])] + [r.coef[mine] for _, r in regs]
+            [np.full(mine.sum(), w) for _, w in own] + [r.coef[mine] for _, r in regs]
         )
         resid = ev.z[mine] - np.einsum("ka,ka->k", coef, xs[mine][:, cols])
         ratio = (resid**2 + out["var_row"][mine]) / noise.base[mine]
         ratio = ratio[np.isfinite(ratio)]  # a state the filter lost (damaged stamps) says nothing
         if ratio.size:
-            noise.scale[i] = max(float(np.mean(ratio)), 1e-4)
+            noise.scale[entry] = max(float(np.mean(ratio)), 1e-4)

@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from altfuse.fuse.smoother.compiled import compiled
+from altfuse.fuse.smoother.events import TICK
 from altfuse.fuse.smoother.kalman import (
     Transition,
     adjoint_predict,
@@ -59,7 +60,7 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
         var_h, var_row = _backward(ev.t, (xf, pf, updates, holds, held), (who, h), dynamics)
     else:
         var_h = pf[:, 0, 0].copy()
-        var_row = np.where(who >= 0, np.einsum("ki,kij,kj->k", h, pf, h), np.nan)
+        var_row = np.where(who != TICK, np.einsum("ki,kij,kj->k", h, pf, h), np.nan)
     return {
         "x": xf, "var_h": var_h, "var_row": var_row, "gain_h": gain_h, "accepted": accepted,
         "loglik": loglik, "nu": nu,
@@ -126,7 +127,7 @@ def _forward(
     on h, whether it passed the gate, its log-likelihood and its normalised innovation
     ``y / sqrt(S)``.
 
-    ``measured``: the events' times, series (-1 a tick), values, variances and rows of H;
+    ``measured``: the events' times, series (:mod:`.events`), values, variances and rows of H;
     ``dynamics``: the mean acceleration over the interval ending at each event, the white
     acceleration density there, the sensor states' densities, the drifting offsets' (offset,
     rate) state pairs, whether the bias is a state and F's entries off its diagonal;
@@ -140,7 +141,8 @@ def _forward(
     x, p = start[0].copy(), start[1].copy()
     count, n = h.shape
     kept = count if keep else 1
-    sensor_accepted = np.full(n, np.nan)  # per state: its sensor's last accepted sample [s]
+    # per state: its sensor's last accepted sample [s] (until one is: its first sample)
+    sensor_accepted = _first_samples(t, who, n)
     sensor_r = np.full(n, np.inf)  # ... and that sample's variance
     refused = np.full((n, 2), np.nan)  # per state: its sensor's last rejection [s] and side
     xf, pf, updates, holds = _kept(kept, n, int((still | landed).sum()) if keep else 1)
@@ -168,24 +170,25 @@ def _forward(
             predict(x, p, fl, q, u, work)
         i = who[k]
         slot = k if keep else 0
-        if i >= 0:
+        if i != TICK:
             y, s = innovation(x, p, z[k], h[k], r[k], ph)
-            if math.isnan(sensor_accepted[3 + i]):
-                sensor_accepted[3 + i] = t[k]
-            if y * y > gate * gate * s:  # shut: has the estimate, or a ground, gone astray?
+            # a height shut: has the estimate, or a ground, gone astray? (a vertical velocity
+            # is gated too, and never a reason to let loose: it says nothing of h)
+            if i >= 0 and y * y > gate * gate * s:
                 seen = (t[k], r[k], h[k, 3 + i], last_accepted, sensor_accepted, sensor_r)
                 if _release(3 + i, y, (seen, refused), p):
                     y, s = innovation(x, p, z[k], h[k], r[k], ph)
                 refused[3 + i, 0], refused[3 + i, 1] = t[k], math.copysign(1.0, y)
             nu[k] = y / math.sqrt(s)
         # the innovation gate: |y| <= gate sqrt(S)
-        if i >= 0 and y * y <= gate * gate * s:
+        if i != TICK and y * y <= gate * gate * s:
             updates[slot, :n] = ph
             updates[slot, n], updates[slot, n + 1] = s, y
             gain_h[k] = abs(update(x, p, y, s, ph))
             accepted[k] = True
-            last_accepted = sensor_accepted[3 + i] = t[k]
-            sensor_r[3 + i] = r[k]
+            if i >= 0:  # a height: the lockout's clocks
+                last_accepted = sensor_accepted[3 + i] = t[k]
+                sensor_r[3 + i] = r[k]
             # log N(y; 0, S)
             loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
         if still[k] or landed[k]:
@@ -193,6 +196,16 @@ def _forward(
             held += 1
         xf[slot], pf[slot] = x, p
     return xf, pf, updates, holds, gain_h, accepted, loglik, nu
+
+
+@compiled
+def _first_samples(t: FloatArray, who: np.ndarray, n: int) -> FloatArray:
+    """Per state: the time of its sensor's first sample [s]; NaN for the other states."""
+    first = np.full(n, np.nan)
+    for k in range(t.size - 1, -1, -1):
+        if who[k] >= 0:
+            first[3 + who[k]] = t[k]
+    return first
 
 
 @compiled
@@ -228,7 +241,13 @@ def _release(
     (now, r, sign, last_accepted, sensor_accepted, sensor_r), refused = seen
     y2 = y * y
     waited = now - last_accepted
-    if waited > LOCKOUT_S or (waited > AGREED_LOCKOUT_S and _agreed(c, y, last_accepted, refused)):
+    # only a sensor the estimate followed until it went astray can say where it went: one
+    # rejected since long before (a GPS 15 m off the barometer for 130 s) is astray itself
+    followed = sensor_accepted[c] >= last_accepted - LOCKOUT_S
+    lost = waited > LOCKOUT_S or (
+        waited > AGREED_LOCKOUT_S and _agreed(c, y, last_accepted, refused)
+    )
+    if followed and lost:
         # no sample of any sensor passed the gate for LOCKOUT_S, or for AGREED_LOCKOUT_S where
         # two sensors failed it on one side: the estimate, not every sensor, has gone astray
         # (ArduPilot's EKF3 resets its height after 5 s); its height and velocity become as
@@ -282,7 +301,7 @@ def _backward(
         p = pf[k]
         # smoothed at k: x_s = x - P lambda;  var = H P H' - (P H')' Lambda (P H')
         var_h[k] = smoothed_variance(p, adjoint[1], unit[0], work)
-        if who[k] >= 0:
+        if who[k] != TICK:
             var_row[k] = smoothed_variance(p, adjoint[1], h[k], work)
         for i in range(n):
             total = 0.0
