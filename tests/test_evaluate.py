@@ -12,10 +12,10 @@ from click.testing import CliRunner
 
 from altfuse.cli import cli
 from altfuse.errors import ParameterError
-from altfuse.evaluation import evaluate, parse_segments
+from altfuse.evaluation import choose_truth, evaluate, parse_segments
 from altfuse.fuse.support import SupportParams
 from altfuse.metrics import error_stats
-from altfuse.pipeline import FuseOptions
+from altfuse.pipeline import FuseOptions, prepare_log
 from altfuse.simulate import BOOT_S, simulate_flight
 from conftest import ROOT, shared_log
 
@@ -177,3 +177,22 @@ def test_the_table_s_columns_stay_apart_at_any_magnitude() -> None:
     assert [len(line.split()) for line in lines] == [7, 7, 7]
     assert lines[1].split()[2:4] == ["19793.323", "12698.125"]
     assert len({len(line) for line in lines}) == 1  # numbers right-aligned to one edge
+
+
+def test_a_segment_with_its_own_ground_has_its_truth_referred_there() -> None:
+    """The Solo's log is spliced: its first segment took off from its own ground, and its
+    sensors are referred there; the truth is too, as the sensors are (on the main segment's
+    ground it read 9 cm off in the first segment)."""
+    prepared = prepare_log(
+        shared_log("truth/copter_3.4dev-solo_djnugent_climb154m_ekf1.BIN"), FuseOptions()
+    )
+    segments = prepared.referred.segments
+    assert len(segments) == 2
+    assert segments[0].on_ground_s is not None
+    truth = choose_truth(prepared.log, prepared.referred, "sim").h
+    t = prepared.referred.t
+    for segment in segments:
+        assert segment.on_ground_s is not None
+        lo, hi = segment.on_ground_s
+        ground = (t >= lo) & (t <= hi)
+        assert abs(np.nanmedian(truth[ground])) < 1e-6

@@ -37,6 +37,7 @@ from altfuse.fuse.smoother.noise import (
 from altfuse.fuse.smoother.passes import LOCKOUT_S
 from altfuse.model import Samples
 from altfuse.params import InvalidParameter
+from altfuse.pipeline import FuseOptions, fuse_log
 from altfuse.simulate import simulate_flight, write_simulated_log
 from conftest import ROOT, shared_log
 
@@ -485,3 +486,21 @@ def test_the_model_check_fails_on_the_sensors_beyond_twice_their_variance() -> N
     verdict = model_check({"nis_gps": 5.09, "nis_gps2": 1.0, "nis_baro": 2.5})
     assert verdict.startswith("failed: mean squared normalised innovation gps 5.09, baro 2.50 ")
     assert "gps2" not in verdict
+
+
+def test_a_splice_starts_the_motion_and_the_offsets_afresh() -> None:
+    """A log stopped for 10 minutes on the ground and resumed: the second segment has its own
+    ground, and every sensor its offset 0 there. Bridged by the model instead, the barometer's
+    drift rate carried 1.8 m over the gap and the fused height sat above both sensors."""
+    run = fuse_log(shared_log("ardupilot/beastayyg_sample.bin"), FuseOptions())
+    segments = run.referred.segments
+    assert len(segments) == 2
+    assert segments[1].on_ground_s is not None
+    t, z = run.referred.t, run.referred.h
+    second = (t >= segments[1].start_s) & np.isfinite(run.result.fused)
+    assert second.sum() > 200
+    # from the sensors' median (GPS and barometer): measured 0.10 m at the median of the
+    # segment's ticks, 0.22 m at 90 %; bridged, 1.80 and 1.93 m
+    apart = np.abs(run.result.fused[second] - np.nanmedian(z[second], axis=1))
+    assert np.median(apart) < 0.3
+    assert np.quantile(apart, 0.9) < 0.5

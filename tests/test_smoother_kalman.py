@@ -17,6 +17,8 @@ import pytest
 from filterpy.kalman import KalmanFilter, rts_smoother
 
 from altfuse.fuse.smoother.model import (
+    RESET_DATUM,
+    RESET_NONE,
     STILL_SIGMA,
     Events,
     Layout,
@@ -25,6 +27,7 @@ from altfuse.fuse.smoother.model import (
     measurement_matrix,
     prior,
     process_noise,
+    reset_states,
     transition,
 )
 from altfuse.fuse.smoother.passes import run
@@ -32,8 +35,9 @@ from altfuse.fuse.smoother.passes import run
 M = 2  # sensors: a GPS and a barometer, the barometer with a drift rate
 
 
-def toy(seed: int, accel: bool) -> tuple[Events, Layout, np.ndarray]:
-    """Events of a simulated flight, the layout, and each event's measurement variance."""
+def toy(seed: int, accel: bool, spliced: bool = False) -> tuple[Events, Layout, np.ndarray]:
+    """Events of a simulated flight, the layout, and each event's measurement variance; with
+    ``spliced``, a splice at event 150 (motion, offsets and drift rate back to the prior)."""
     rng = np.random.default_rng(seed)
     count = 300
     t = np.cumsum(rng.uniform(0.01, 0.2, count))
@@ -49,9 +53,12 @@ def toy(seed: int, accel: bool) -> tuple[Events, Layout, np.ndarray]:
     landed = np.zeros(count, dtype=bool)
     landed[-30:] = who[-30:] == -1  # ticks on the ground after landing: v = 0 alone
     q_accel = np.full(count, 0.05)
+    reset = np.zeros(count, dtype=np.int64)
+    reset[150] = RESET_DATUM if spliced else RESET_NONE
     events = Events(
-        t, who, z, a, q_state, still, q_accel, True, np.inf, float(z[who >= 0][0]), landed
-    )
+        t, who, z, a, q_state, still, q_accel, True, np.inf, float(z[who >= 0][0]), landed,
+        reset,
+    )  # fmt: skip
     scale = Regressor("scale", 1, np.where(who == 1, truth, 0.0), 0.02)
     layout = Layout(np.ones(M), (scale,), drifting=(1,))
     return events, layout, r
@@ -64,12 +71,21 @@ def filterpy_passes(
     the ground: its step, then the two holds as steps of their own with no time between)."""
     n, drifts = layout.n, layout.drift_pairs
     dts = np.diff(ev.t, prepend=ev.t[0])
+    x0, p0 = prior(ev, layout)
     steps = []  # per filterpy step: (event, F, Q, u, H row, z, R)
     for k, dt in enumerate(dts):
         f, q = np.eye(n), np.zeros((n, n))
         transition(f, dt, ev.use_bias, drifts)
         process_noise(q, dt, ev.q_accel[k], ev.q_state[k], True, drifts)
         u = np.array([[0.5 * ev.a[k] * dt * dt], [ev.a[k] * dt]])
+        if ev.reset is not None and ev.reset[k]:
+            # the prediction alone, then the splice: F = 0 and Q the prior's on the states
+            # that return to it, their prior mean through the input (h's; the rest is 0)
+            steps.append((k, f, q, u, np.zeros((1, n)), None, 1.0))
+            back = reset_states(layout)[ev.reset[k]]
+            f = np.diag(np.where(back, 0.0, 1.0))
+            q = np.where(np.outer(back, back), p0, 0.0)
+            u = np.array([[x0[0] if back[0] else 0.0], [x0[1] if back[1] else 0.0]])
         row = np.zeros((1, n))
         i = ev.who[k]
         if i >= 0:
@@ -85,7 +101,7 @@ def filterpy_passes(
             steps.append((k, np.eye(n), np.zeros((n, n)), np.zeros((2, 1)), hold, np.zeros(1),
                           STILL_SIGMA**2))  # fmt: skip
     kf = KalmanFilter(dim_x=n, dim_z=1, dim_u=2)
-    x0, kf.P = prior(ev, layout)
+    kf.P = p0
     kf.x = x0.reshape(n, 1)
     fs, qs = [st[1] for st in steps], [st[2] for st in steps]
     xf, pf, _, _ = kf.batch_filter(
@@ -117,9 +133,10 @@ def assert_matches(ours: dict[str, np.ndarray], ev: Events, layout: Layout, x, p
     np.testing.assert_allclose(ours["var_row"], var_row, rtol=0, atol=1e-9)
 
 
+@pytest.mark.parametrize("spliced", [False, True])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_forward_filter_is_filterpys_kalman_filter(seed: int) -> None:
-    ev, layout, r = toy(seed, accel=True)
+def test_forward_filter_is_filterpys_kalman_filter(seed: int, spliced: bool) -> None:
+    ev, layout, r = toy(seed, accel=True, spliced=spliced)
     ours = run(ev, r, layout, smooth=False)
     xf, pf, _, _ = filterpy_passes(ev, layout, r)
     assert ours["accepted"][ev.who >= 0].all()
@@ -129,10 +146,11 @@ def test_forward_filter_is_filterpys_kalman_filter(seed: int) -> None:
     assert_matches(ours, ev, layout, xf, pf)
 
 
+@pytest.mark.parametrize("spliced", [False, True])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_smoother_is_filterpys_rts_smoother(seed: int) -> None:
+def test_smoother_is_filterpys_rts_smoother(seed: int, spliced: bool) -> None:
     # filterpy's rts_smoother takes no control input: the toy's accelerometer reads 0
-    ev, layout, r = toy(seed, accel=False)
+    ev, layout, r = toy(seed, accel=False, spliced=spliced)
     ours = run(ev, r, layout)
     _, _, xs, ps = filterpy_passes(ev, layout, r)
     assert_matches(ours, ev, layout, xs, ps)

@@ -140,11 +140,16 @@ class _Ground:
 
 @dataclass(frozen=True)
 class Segment:
-    """A part of a spliced log, and whose datum it was referred with."""
+    """A part of a spliced log, and whose datum it was referred with: its own or the main
+    segment's ground (``grounded``: each sensor's offset is 0 there, and ``on_ground_s`` the
+    span in which the vehicle stood at that take-off point, where there is one), or the main
+    segment's offsets carried over (a log resumed in flight)."""
 
     start_s: float
     end_s: float
     datum: str
+    grounded: bool = True
+    on_ground_s: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -274,20 +279,22 @@ def refer_to_takeoff(
     for a, b in pieces:
         part = aligned.part(a, b)
         own = None if (a, b) == main else _own_datum(part, *options)
+        grounded, still = True, None
         if (a, b) == main:
-            h[a:b], how = first.h, "the main segment's"
+            h[a:b], how, still = first.h, "the main segment's", first.on_ground_s
         elif own is not None:
             for j, name in enumerate(first.names):
                 if name in own.names:
                     h[a:b, j] = own.h[:, own.names.index(name)]
             how = f"its own, ground before take-off at {own.takeoff_s:.1f} s"
+            still = own.on_ground_s
         else:
             for j, o in enumerate(first.offsets):
                 h[a:b, j] = (part.z[:, columns[j]] - o.offset_m) / o.scale
-            how = "the main segment's offsets (no take-off in it)"
+            how, grounded = "the main segment's offsets (no take-off in it)", False
         ticks = t[a:b][valid[a:b]]
         if ticks.size:
-            segments.append(Segment(float(ticks[0]), float(ticks[-1]), how))
+            segments.append(Segment(float(ticks[0]), float(ticks[-1]), how, grounded, still))
     return replace(first, t=t, h=h, segments=tuple(segments))
 
 

@@ -119,7 +119,8 @@ REFERENCE_MAX_GAP_S = 1.0
 
 def _on_clock(series: Series, referred: Referred) -> FloatArray:
     """``series`` on the clock (linear, no extrapolation, no bridging of a pause in it),
-    referred over the ground window."""
+    referred over the ground window; in a spliced log, each segment with a ground of its own
+    over that ground, as the sensors are (:func:`altfuse.datum.refer_to_takeoff`)."""
     t = referred.t
     order = np.argsort(series.t, kind="stable")
     ts, values = series.t[order], series.value[order]
@@ -135,7 +136,15 @@ def _on_clock(series: Series, referred: Referred) -> FloatArray:
         ground = np.isfinite(h)
     if not ground.any():
         return h
-    return np.asarray(h - np.median(h[ground]))
+    h = h - np.median(h[ground])
+    for segment in referred.segments:
+        if segment.on_ground_s is None or segment.on_ground_s[0] <= hi <= segment.end_s:
+            continue  # the main segment's ground (referred above), or none of its own
+        own = (t >= segment.on_ground_s[0]) & (t <= segment.on_ground_s[1]) & np.isfinite(h)
+        part = (t >= segment.start_s) & (t <= segment.end_s)
+        if own.any():
+            h[part] -= np.median(h[own])
+    return np.asarray(h)
 
 
 #: A simulator's truth is checked against the sensors where either moves: its heights must

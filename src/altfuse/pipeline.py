@@ -185,6 +185,14 @@ def _samples(series: Series | None) -> Samples | None:
     return None if series is None else Samples(series.t, series.value)
 
 
+def _on_ground(referred: Referred) -> tuple[tuple[float, float], ...]:
+    """The spans in which the vehicle stood at its take-off point: the main segment's, and
+    each other segment's with its own ground."""
+    if not referred.segments:
+        return () if referred.on_ground_s is None else (referred.on_ground_s,)
+    return tuple(s.on_ground_s for s in referred.segments if s.on_ground_s is not None)
+
+
 def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> FusionInput:
     """What the pipeline hands method ``chosen`` (named ``name`` in errors): the referred
     sensors on the clock and their own samples, and from the log what it ``uses``.
@@ -223,7 +231,8 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         kinds=referred.kinds,
         samples=referred_samples(prepared.sensors, referred),
         dt_s=1.0 / prepared.aligned.rate_hz,
-        on_ground_s=referred.on_ground_s,
+        on_ground_s=_on_ground(referred),
+        splices=tuple((s.start_s, s.grounded) for s in referred.segments[1:]),
         speed=_samples(flight.ground_speed),
         temperatures=tuple(_samples(temps.get(n)) for n in referred.names),
         accel=accel,

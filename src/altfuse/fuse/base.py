@@ -45,7 +45,12 @@ class FusionInput:
     dt_s
         The clock's tick [s].
     on_ground_s
-        A span [s] in which the vehicle stood at the take-off point; None if the log cannot tell.
+        The spans [s] in which the vehicle stood at its take-off point (one per segment of a
+        spliced log with its own ground); empty if the log cannot tell.
+    splices
+        Each segment's start [s] after the first, where the log was spliced (nothing says where
+        the vehicle went between), and whether its heights were referred to a ground (its own or
+        the main segment's: every offset 0 there) or carry the main segment's offsets.
     speed
         Horizontal speed over ground [m/s] samples; None if the log has none.
     temperatures
@@ -78,7 +83,8 @@ class FusionInput:
     kinds: tuple[SensorKind, ...]
     samples: tuple[Samples, ...]
     dt_s: float
-    on_ground_s: tuple[float, float] | None = None
+    on_ground_s: tuple[tuple[float, float], ...] = ()
+    splices: tuple[tuple[float, bool], ...] = ()
     speed: Samples | None = None
     temperatures: tuple[Samples | None, ...] = ()
     accel: VerticalAcceleration | None = None

@@ -56,6 +56,15 @@ error of that measurement as its prior (:func:`.model.datum_priors`),
 not the 1 m of an offset the flight says nothing about (the 4.5 plane: fused_std 0.58 m, for
 errors of 2-7 cm, coverage 1.00; now 0.027 m, 0.97).
 
+A spliced log (the datum's segments, :func:`altfuse.datum.refer_to_takeoff`) starts afresh at
+each later segment's first event (:func:`.kalman.restart`; the backward pass carries nothing
+back across it): ``h`` and ``v`` return to their prior, nothing saying where the vehicle went
+meanwhile, and where the segment was referred to a ground (its own or the main one's) every
+sensor's offset and drift rate too, each 0 at that ground, where ``h = 0`` and ``v = 0`` hold
+as on the main one. The accelerometer's bias and the regressors are the sensors' own, and kept.
+Bridged by the model instead, a real log's barometer drift rate carried 1.8 m over a 10-minute
+pause, and the fused height sat that far above both sensors after it (0.10 m since).
+
 Without IMU or ATT records the model falls back to altitude only: ``a = 0``, ``b`` frozen at 0,
 and a larger acceleration noise (a constant-velocity random walk); the metadata says so.
 
@@ -180,6 +189,8 @@ from altfuse.fuse.smoother.model import (
     Layout,
     datum_priors,
     landed_events,
+    reset_events,
+    still_events,
     thermal_regressors,
 )
 from altfuse.fuse.smoother.noise import (
@@ -265,10 +276,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     times, who, values, position = merge_events(samples, inputs.t, velocity)
     # each sample's variance: the local noise of its sensor times a scale refined by EM
     noise = measurement_noise(inputs, params.sigma_m, (who, position), velocity)
-    still = np.zeros(times.size, dtype=bool)
-    if inputs.on_ground_s is not None:
-        lo, hi = inputs.on_ground_s
-        still = (who == -1) & (times >= lo) & (times <= hi)
+    still = still_events(times, who, inputs.on_ground_s)
     a, q_added = _accelerometer(inputs, times)
     first = [s.value[0] for s in samples if s.value.size]
     h0 = float(np.median(first)) if first else 0.0
@@ -277,7 +285,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     landed = landed_events(times, who, inputs.landed, inputs.speed) & ~still
     ev = Events(
         times, who, values, a, q_events, still, q_accel + q_added, use_imu, params.gate_sigma, h0,
-        landed,
+        landed, reset_events(times, inputs.splices),
     )  # fmt: skip
     physical = ev
     if params.offset_noise_m2_s:

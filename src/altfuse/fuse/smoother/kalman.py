@@ -159,6 +159,39 @@ def adjoint_update(
 
 
 @compiled
+def restart(
+    x: FloatArray, p: FloatArray, start: tuple[FloatArray, FloatArray], states: np.ndarray
+) -> None:
+    """The ``states`` (a mask) return to the prior ``start``, in place: their mean and
+    covariance the prior's, uncorrelated with the rest (a transition with ``F = 0`` and
+    ``Q`` the prior's covariance for them, the identity for the others)."""
+    x0, p0 = start
+    n = x.size
+    for i in range(n):
+        if states[i]:
+            x[i] = x0[i]
+            for j in range(n):
+                p[i, j] = p[j, i] = 0.0
+    for i in range(n):
+        for j in range(n):
+            if states[i] and states[j]:
+                p[i, j] = p0[i, j]
+
+
+@compiled
+def adjoint_restart(adjoint: tuple[FloatArray, FloatArray], states: np.ndarray) -> None:
+    """The adjoint carried back through :func:`restart`, in place: ``F = 0`` for the
+    ``states``, so their entries of lambda and their rows and columns of Lambda vanish."""
+    lam, big = adjoint
+    n = lam.size
+    for i in range(n):
+        if states[i]:
+            lam[i] = 0.0
+            for j in range(n):
+                big[i, j] = big[j, i] = 0.0
+
+
+@compiled
 def adjoint_predict(adjoint: tuple[FloatArray, FloatArray], fl: Transition, work: Scratch) -> None:
     """The smoother's adjoint carried back through a transition, in place: from the prior at
     step k to the posterior at k - 1 (``F`` between them)."""

@@ -12,7 +12,7 @@ from typing import Literal
 import numpy as np
 
 from altfuse.fuse.smoother.compiled import compiled
-from altfuse.fuse.smoother.events import VELOCITY
+from altfuse.fuse.smoother.events import TICK, VELOCITY
 from altfuse.fuse.smoother.kalman import innovation, update
 from altfuse.metrics import mad_sigma, runs
 from altfuse.model import FloatArray, Samples
@@ -90,6 +90,29 @@ def datum_priors(
         if there.size < MIN_DATUM_SAMPLES:
             continue
         out[i] = math.hypot(mad_sigma(there) / math.sqrt(there.size), STILL_SIGMA)
+    return out
+
+
+def still_events(
+    times: FloatArray, who: np.ndarray, spans: Sequence[tuple[float, float]]
+) -> np.ndarray:
+    """The clock ticks at which the vehicle stands at its take-off point (``spans``: the
+    datum's ground windows, one per segment of a spliced log with its own ground)."""
+    out = np.zeros(times.size, dtype=bool)
+    for lo, hi in spans:
+        out |= (times >= lo) & (times <= hi)
+    out &= who == TICK
+    return out
+
+
+def reset_events(times: FloatArray, splices: Sequence[tuple[float, bool]]) -> np.ndarray:
+    """Per event, what a splice resets there (RESET_*): at the first event of each segment
+    after the first (``splices``: its start and whether it was referred to a ground)."""
+    out = np.zeros(times.size, dtype=np.int64)
+    for start, grounded in splices:
+        k = int(np.searchsorted(times, start))
+        if k < times.size:
+            out[k] = RESET_DATUM if grounded else RESET_MOTION
     return out
 
 
@@ -251,7 +274,9 @@ class Events:
     sensor states' random-walk densities over that interval; ``still``: the events at which the
     vehicle is known to stand at the take-off point; ``h0``: the first height guess;
     ``landed``: the events at which it stands still elsewhere on the ground, none of
-    ``still`` (v = 0 alone; None: none).
+    ``still`` (v = 0 alone; None: none); ``reset``: the first event of each segment of a
+    spliced log, the row of :func:`reset_states` that returns to the prior there (0 elsewhere;
+    None: none).
     """
 
     t: FloatArray
@@ -265,6 +290,7 @@ class Events:
     gate: float
     h0: float
     landed: np.ndarray | None = None
+    reset: np.ndarray | None = None
 
 
 @compiled
@@ -324,6 +350,27 @@ def hold_still(x: FloatArray, p: FloatArray, record: FloatArray, at_datum: bool)
         y, s = innovation(x, p, 0.0, row, STILL_SIGMA**2, ph)
         record[j, n], record[j, n + 1] = s, y
         update(x, p, y, s, ph)
+
+
+#: What a splice resets (the rows of :func:`reset_states`): nothing, where the vehicle is (a
+#: log resumed in flight, its sensors' offsets the main segment's), and where the vehicle is
+#: with every sensor's offset and drift (a segment referred to its own ground).
+RESET_NONE, RESET_MOTION, RESET_DATUM = 0, 1, 2
+
+
+def reset_states(layout: Layout) -> np.ndarray:
+    """Per row of RESET_*, the states that return to the prior (3, n): at a splice nothing says
+    where the vehicle went meanwhile (h, v); in a segment with its own datum each sensor's
+    offset is 0 at its ground, and a drift rate is not carried across. The accelerometer's bias
+    and the regressors (a barometer's temperature coefficient, its scale, the velocity's lag)
+    are the sensors' own, and are kept."""
+    rows = np.zeros((3, layout.n), dtype=np.bool_)
+    rows[RESET_MOTION, :2] = True
+    rows[RESET_DATUM, :2] = True
+    rows[RESET_DATUM, 3 : 3 + layout.sign.size] = True
+    if layout.drifting:
+        rows[RESET_DATUM, layout.drift_pairs[:, 1]] = True
+    return rows
 
 
 def prior(ev: Events, layout: Layout) -> tuple[FloatArray, FloatArray]:

@@ -11,11 +11,14 @@ import numpy as np
 from altfuse.fuse.smoother.compiled import compiled
 from altfuse.fuse.smoother.events import TICK
 from altfuse.fuse.smoother.kalman import (
+    Scratch,
     Transition,
     adjoint_predict,
+    adjoint_restart,
     adjoint_update,
     innovation,
     predict,
+    restart,
     scratch,
     smoothed_variance,
     update,
@@ -28,6 +31,7 @@ from altfuse.fuse.smoother.model import (
     measurement_matrix,
     prior,
     process_noise,
+    reset_states,
     transition,
 )
 from altfuse.model import FloatArray
@@ -51,13 +55,14 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
     measured = _measured(ev, r, layout)
     dynamics = _dynamics(ev, layout)
     ground = _ground(ev)
+    resets = _resets(ev, layout)
     xf, pf, updates, holds, gain_h, accepted, loglik, nu = _forward(
-        measured, dynamics, ground, ev.gate, prior(ev, layout), True
+        measured, dynamics, ground, ev.gate, (*prior(ev, layout), *resets), True
     )
     h, who = measured[4], measured[1]
     if smooth:
         held = ground[0] | ground[1]
-        var_h, var_row = _backward(ev.t, (xf, pf, updates, holds, held), (who, h), dynamics)
+        var_h, var_row = _backward(ev.t, (xf, pf, updates, holds, held), (who, h), dynamics, resets)
     else:
         var_h = pf[:, 0, 0].copy()
         var_row = np.where(who != TICK, np.einsum("ki,kij,kj->k", h, pf, h), np.nan)
@@ -77,7 +82,7 @@ def likelihood(ev: Events, r: FloatArray, layout: Layout) -> dict[str, np.ndarra
         _dynamics(ev, layout),
         _ground(ev),
         ev.gate,
-        prior(ev, layout),
+        (*prior(ev, layout), *_resets(ev, layout)),
         False,
     )
     return {"accepted": accepted, "loglik": loglik, "last": last[0]}
@@ -99,6 +104,13 @@ def _ground(ev: Events) -> tuple[np.ndarray, np.ndarray]:
     return still, landed
 
 
+def _resets(ev: Events, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
+    """The events at which part of the state returns to its prior (a splice: 0 none, else the
+    row of ``reset_states`` to return), and those rows, as the kernels take them."""
+    kinds = np.zeros(ev.t.size, dtype=np.int64) if ev.reset is None else ev.reset
+    return kinds.astype(np.int64), reset_states(layout)
+
+
 def _dynamics(
     ev: Events, layout: Layout
 ) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray]:
@@ -116,7 +128,7 @@ def _forward(
     dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray],
     ground: tuple[np.ndarray, np.ndarray],
     gate: float,
-    start: tuple[FloatArray, FloatArray],
+    start: tuple[FloatArray, FloatArray, np.ndarray, np.ndarray],
     keep: bool,
 ) -> tuple[
     FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray, FloatArray, FloatArray
@@ -132,11 +144,12 @@ def _forward(
     acceleration density there, the sensor states' densities, the drifting offsets' (offset,
     rate) state pairs, whether the bias is a state and F's entries off its diagonal;
     ``ground``: the events held at the datum (h = 0 and v = 0) and standing elsewhere on the
-    ground (v = 0); ``start``: the prior; ``keep``: whether to keep the states, covariances
-    and updates (else one slot, overwritten).
+    ground (v = 0); ``start``: the prior, and per event the row of the states (``start[3]``,
+    row 0: none) that return to it there (a splice); ``keep``: whether to keep the states,
+    covariances and updates (else one slot, overwritten).
     """
     t, who, z, r, h = measured
-    a, q_accel, q_state, drifts, use_bias, links = dynamics
+    links = dynamics[5]
     still, landed = ground
     x, p = start[0].copy(), start[1].copy()
     count, n = h.shape
@@ -160,14 +173,8 @@ def _forward(
     previous = last_accepted = t[0]
     held = 0
     for k in range(count):
-        dt = t[k] - previous
+        _advance(x, p, (k, t[k] - previous), dynamics, (fl, q, u, work), start)
         previous = t[k]
-        if dt > 0:
-            # the accelerometer as the control input: B u = [a dt^2 / 2, a dt, 0, ...]
-            u[0], u[1] = 0.5 * a[k] * dt * dt, a[k] * dt
-            transition(fl[0], dt, use_bias, drifts)
-            process_noise(q, dt, q_accel[k], q_state[k], use_bias, drifts)
-            predict(x, p, fl, q, u, work)
         i = who[k]
         slot = k if keep else 0
         if i != TICK:
@@ -196,6 +203,32 @@ def _forward(
             held += 1
         xf[slot], pf[slot] = x, p
     return xf, pf, updates, holds, gain_h, accepted, loglik, nu
+
+
+@compiled
+def _advance(
+    x: FloatArray,
+    p: FloatArray,
+    step: tuple[int, float],
+    dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray],
+    work: tuple[Transition, FloatArray, FloatArray, Scratch],
+    start: tuple[FloatArray, FloatArray, np.ndarray, np.ndarray],
+) -> None:
+    """The prior at event ``k`` from the posterior ``dt`` before (``step``), in place: the
+    prediction over ``dt``, then, at a splice, the return of part of the state to the prior
+    (``start``, as :func:`_forward` takes them). ``work``: F, Q, the input and scratch."""
+    k, dt = step
+    a, q_accel, q_state, drifts, use_bias, _ = dynamics
+    fl, q, u, scratch_space = work
+    if dt > 0:
+        # the accelerometer as the control input: B u = [a dt^2 / 2, a dt, 0, ...]
+        u[0], u[1] = 0.5 * a[k] * dt * dt, a[k] * dt
+        transition(fl[0], dt, use_bias, drifts)
+        process_noise(q, dt, q_accel[k], q_state[k], use_bias, drifts)
+        predict(x, p, fl, q, u, scratch_space)
+    reset, returning = start[2], start[3]
+    if reset[k] > 0:
+        restart(x, p, (start[0], start[1]), returning[reset[k]])
 
 
 @compiled
@@ -271,19 +304,39 @@ def _release(
 
 
 @compiled
+def _back_through_sample(
+    adjoint: tuple[FloatArray, FloatArray],
+    event: tuple[int, FloatArray, FloatArray],
+    resets: tuple[np.ndarray, np.ndarray],
+    work: Scratch,
+) -> None:
+    """The adjoint carried back through event ``k``'s sample update (``record``: its ``P H'``,
+    ``S`` and innovation, ``S`` 0 where it was not fused; ``row``: its H), then through the
+    return of part of the state to the prior there (a splice), in place."""
+    k, record, row = event
+    n = row.size
+    if record[n] > 0.0:
+        adjoint_update(adjoint, row, (record[:n], record[n], record[n + 1]), work)
+    if resets[0][k] > 0:  # the states that returned to the prior owe nothing to before
+        adjoint_restart(adjoint, resets[1][resets[0][k]])
+
+
+@compiled
 def _backward(
     t: FloatArray,
     filtered: tuple[FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray],
     rows: tuple[np.ndarray, FloatArray],
     dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray],
+    resets: tuple[np.ndarray, np.ndarray],
 ) -> tuple[FloatArray, FloatArray]:
     """The modified Bryson-Frazier pass (:mod:`.kalman`) back over the filtered events: the
     filtered states become the smoothed ones, in place; returns the smoothed variance of ``h``
     at every event and of each sample's own row ``H x`` (NaN at a tick).
 
     ``filtered``: :func:`_forward`'s states, covariances, updates and holds, and which events
-    were held on the ground; ``rows``: the events' series and rows of H. The covariances are left
-    filtered: only the variances asked for are made of the smoothed ones."""
+    were held on the ground; ``rows``: the events' series and rows of H; ``resets``: per event
+    the row of the states that returned to the prior there, and those rows. The covariances are
+    left filtered: only the variances asked for are made of the smoothed ones."""
     xs, pf, updates, holds, held_at = filtered
     who, h = rows
     _, _, _, drifts, use_bias, links = dynamics
@@ -315,9 +368,7 @@ def _backward(
                 record = holds[held, j]
                 if record[n] > 0.0:  # S 0: no hold of this state here
                     adjoint_update(adjoint, unit[j], (record[:n], record[n], record[n + 1]), work)
-        if updates[k, n] > 0.0:
-            record = updates[k]
-            adjoint_update(adjoint, h[k], (record[:n], record[n], record[n + 1]), work)
+        _back_through_sample(adjoint, (k, updates[k], h[k]), resets, work)
         # and through the transition into k
         dt = t[k] - t[k - 1] if k > 0 else 0.0
         if dt > 0:
