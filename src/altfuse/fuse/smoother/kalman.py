@@ -167,11 +167,13 @@ def restart(
     ``Q`` the prior's covariance for them, the identity for the others)."""
     x0, p0 = start
     n = x.size
+    # x_R = x0_R;  P_R. = P_.R = 0
     for i in range(n):
         if states[i]:
             x[i] = x0[i]
             for j in range(n):
                 p[i, j] = p[j, i] = 0.0
+    # P_RR = P0_RR
     for i in range(n):
         for j in range(n):
             if states[i] and states[j]:
@@ -184,6 +186,7 @@ def adjoint_restart(adjoint: tuple[FloatArray, FloatArray], states: np.ndarray) 
     ``states``, so their entries of lambda and their rows and columns of Lambda vanish."""
     lam, big = adjoint
     n = lam.size
+    # lambda = F' lambda, Lambda = F' Lambda F, with F the identity but F_RR = 0
     for i in range(n):
         if states[i]:
             lam[i] = 0.0

@@ -48,6 +48,10 @@ STILL_SIGMA = 0.005
 #: while the GPS says the vehicle moves slower than LANDED_MAX_SPEED_M_S [m/s].
 LANDED_MARGIN_S = 2.0
 LANDED_MAX_SPEED_M_S = 1.0
+#: What a splice resets (the rows of :func:`reset_states`): nothing, where the vehicle is (a
+#: log resumed in flight, its sensors' offsets the main segment's), and where the vehicle is
+#: with every sensor's offset and drift (a segment referred to its own ground).
+RESET_NONE, RESET_MOTION, RESET_DATUM = 0, 1, 2
 #: Prior on a sensor's offset from the datum [m], where the flight says nothing better; and the
 #: fewest samples on the ground that say better.
 OFFSET_PRIOR = 1.0
@@ -350,12 +354,6 @@ def hold_still(x: FloatArray, p: FloatArray, record: FloatArray, at_datum: bool)
         y, s = innovation(x, p, 0.0, row, STILL_SIGMA**2, ph)
         record[j, n], record[j, n + 1] = s, y
         update(x, p, y, s, ph)
-
-
-#: What a splice resets (the rows of :func:`reset_states`): nothing, where the vehicle is (a
-#: log resumed in flight, its sensors' offsets the main segment's), and where the vehicle is
-#: with every sensor's offset and drift (a segment referred to its own ground).
-RESET_NONE, RESET_MOTION, RESET_DATUM = 0, 1, 2
 
 
 def reset_states(layout: Layout) -> np.ndarray:
