@@ -163,9 +163,11 @@ The passes are checked against filterpy's ``KalmanFilter.batch_filter`` and ``rt
 on a linear-Gaussian toy to 1e-9 (``tests/test_smoother_kalman.py``). filterpy itself is not
 used here: each step carries one scalar measurement of any sensor, or none (a clock tick),
 gated, and the gains per sensor are needed for the contributions. Cost is linear in the
-number of events: 7 us an event over all its passes on a 1-hour flight with its 400 Hz IMU
-(``benchmarks/smoother_bench.py``; 12 us with Rauch-Tung-Striebel's O(n^3) gain), 2.2x
-``support``'s time on a 300 MB log end to end (8.7-9.0 s against 4.0-4.4 s; 3.3x before).
+number of events: 5 us an event over all its passes on a 1-hour flight with its 400 Hz IMU
+and the GPS's velocity (``benchmarks/smoother_bench.py``; 12 us with Rauch-Tung-Striebel's
+O(n^3) gain), 2.8x ``support``'s time on a 300 MB log end to end (8.1-8.4 s against 2.9-3.0 s;
+2.2x before the velocity and its lag state, 3.3x before the compiled passes), 926 MB against
+517 MB (the covariances kept for the backward pass).
 """
 
 from __future__ import annotations
