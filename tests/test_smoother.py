@@ -504,3 +504,24 @@ def test_a_splice_starts_the_motion_and_the_offsets_afresh() -> None:
     apart = np.abs(run.result.fused[second] - np.nanmedian(z[second], axis=1))
     assert np.median(apart) < 0.3
     assert np.quantile(apart, 0.9) < 0.5
+
+
+def test_a_sensor_left_alone_is_let_loose_though_the_estimate_never_followed_it() -> None:
+    """The lockout's release takes a sample of a sensor the estimate followed until it went
+    astray; where every such sensor has gone silent (a barometer lost), the one left must still
+    be let loose after LOCKOUT_S, or the estimate coasts on the accelerometer for the rest of
+    the flight. Here the GPS steps 15 m at 20 s and stays (rejected against the barometer),
+    and the barometer is lost at 40 s: from then on only the GPS says where the vehicle is."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 90.0, 0.1)
+    truth = np.full(t.size, 10.0)
+    gps = truth + np.where(t >= 20.0, 15.0, 0.0) + rng.normal(0.0, 0.1, t.size)
+    baro = np.where(t < 40.0, truth + rng.normal(0.0, 0.05, t.size), np.nan)
+    inputs = FusionInput.from_heights(
+        np.column_stack([gps, baro]), 0.1, kinds=("gps", "baro"), accel_up=np.zeros(t.size)
+    )
+    res = fuse_smoother(inputs, SmootherParams())
+    late = t >= 40.0 + LOCKOUT_S + 5.0
+    # with nothing else left, the GPS is followed (its step is no longer told from a climb)
+    assert np.max(np.abs(res.fused[late] - gps[late])) < 1.0
+    assert res.params["rejected_gps"] < 10 * (20.0 + LOCKOUT_S + 5.0)

@@ -242,6 +242,21 @@ def _agreed(c: int, y: float, last_accepted: float, refused: FloatArray) -> bool
 
 
 @compiled
+def _silent(now: float, last_accepted: float, accepted: FloatArray, refused: FloatArray) -> bool:
+    """Whether every sensor the estimate followed until the last accepted sample (``accepted``,
+    per state its sensor's last accepted sample [s], within LOCKOUT_S of ``last_accepted``)
+    has given no sample, accepted or rejected (``refused[:, 0]``), for LOCKOUT_S."""
+    for j in range(3, accepted.size):
+        if accepted[j] >= last_accepted - LOCKOUT_S:
+            heard = (
+                max(accepted[j], refused[j, 0]) if not math.isnan(refused[j, 0]) else accepted[j]
+            )
+            if now - heard <= LOCKOUT_S:
+                return False
+    return True
+
+
+@compiled
 def _release(
     c: int,
     y: float,
@@ -257,8 +272,11 @@ def _release(
     y2 = y * y
     waited = now - last_accepted
     # only a sensor the estimate followed until it went astray can say where it went: one
-    # rejected since long before (a GPS 15 m off the barometer for 130 s) is astray itself
-    followed = sensor_accepted[c] >= last_accepted - LOCKOUT_S
+    # rejected since long before (a GPS 15 m off the barometer for 130 s) is astray itself,
+    # unless every sensor followed has gone silent (a barometer lost): it is all there is
+    followed = sensor_accepted[c] >= last_accepted - LOCKOUT_S or _silent(
+        now, last_accepted, sensor_accepted, refused
+    )
     lost = waited > LOCKOUT_S or (
         waited > AGREED_LOCKOUT_S and _agreed(c, y, last_accepted, refused)
     )
