@@ -41,8 +41,8 @@ log whose velocity is noise). Its noise is learnt as a sensor's, never below
 ``MIN_SIGMA_VELOCITY_M_S`` (0.1 m/s): its errors are correlated over seconds, which the spread
 between samples does not show, and EM took the simulators' to 9 mm/s (0.003 m/s of bias in a
 climb then cost a 305 m climb 0.013 -> 0.042 m RMSE). It tells the accelerometer's errors from
-the heights' within a sample: Paper A's flight with an attitude error 0.479 -> 0.035 m RMSE,
-simulated barometer drifts and losses 0.30-0.58 -> 0.07-0.32 m; the simulators' own logs, whose
+the heights' within a sample: Paper A's flight with an attitude error 0.479 -> 0.038 m RMSE,
+simulated barometer drifts and losses 0.30-0.58 -> 0.07-0.31 m; the simulators' own logs, whose
 heights are precise, move by at most 1 mm (the Solo's maximum error 0.143 -> 0.100 m). Its
 samples never let the gate loose (:func:`.passes._release`): they say nothing of ``h``.
 
