@@ -504,6 +504,11 @@ def test_a_splice_starts_the_motion_and_the_offsets_afresh() -> None:
     apart = np.abs(run.result.fused[second] - np.nanmedian(z[second], axis=1))
     assert np.median(apart) < 0.3
     assert np.quantile(apart, 0.9) < 0.5
+    # in the pause the states are the model's guess (the velocity ramped to 6 m/s): not written
+    pause = np.isnan(run.result.fused)
+    assert pause.sum() > 1000
+    assert np.isnan(run.result.tick_traces["velocity"][pause]).all()
+    assert np.isnan(run.result.traces["offset"][pause]).all()
 
 
 def test_a_sensor_left_alone_is_let_loose_though_the_estimate_never_followed_it() -> None:

@@ -325,11 +325,12 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         fused=np.where(valid, xs[:, 0], np.nan),
         weights=weights,
         status=status,
-        traces={"offset": xs[:, 3 : 3 + m]},
+        # the states where a sensor is (in a pause of every sensor they are the model's guess)
+        traces={"offset": np.where(valid[:, None], xs[:, 3 : 3 + m], np.nan)},
         tick_traces={
             "fused_std": np.where(valid, np.sqrt(np.maximum(var_h, 0.0)), np.nan),
-            "velocity": xs[:, 1],
-            "accel_bias": xs[:, 2],
+            "velocity": np.where(valid, xs[:, 1], np.nan),
+            "accel_bias": np.where(valid, xs[:, 2], np.nan),
         },
         params={
             "model": "accelerometer-driven" if use_imu else "altitude-only random walk (no IMU)",
