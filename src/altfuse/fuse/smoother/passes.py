@@ -16,10 +16,12 @@ from altfuse.fuse.smoother.kalman import (
     adjoint_restart,
     adjoint_update,
     innovation,
+    pack,
     predict,
     restart,
     scratch,
     smoothed_variance,
+    unpack,
     update,
 )
 from altfuse.fuse.smoother.model import (
@@ -63,8 +65,9 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
         held = ground[0] | ground[1]
         var_h, var_row = _backward(ev.t, (xf, pf, updates, holds, held), (who, h), dynamics, resets)
     else:
-        var_h = pf[:, 0, 0].copy()
-        var_row = np.where(who != TICK, np.einsum("ki,kij,kj->k", h, pf, h), np.nan)
+        var_h = pf[:, 0].copy()  # the packed triangle's first entry: P[0, 0]
+        full = pf[:, _packed_index(layout.n)]
+        var_row = np.where(who != TICK, np.einsum("ki,kij,kj->k", h, full, h), np.nan)
     return {
         "x": xf, "var_h": var_h, "var_row": var_row, "gain_h": gain_h, "accepted": accepted,
         "loglik": loglik, "nu": nu,
@@ -101,6 +104,14 @@ def _ground(ev: Events) -> tuple[np.ndarray, np.ndarray]:
     still = ev.still.astype(np.bool_)
     landed = np.zeros_like(still) if ev.landed is None else ev.landed.astype(np.bool_)
     return still, landed
+
+
+def _packed_index(n: int) -> np.ndarray:
+    """Where each entry of an (n, n) symmetric matrix lies in :func:`.kalman.pack`'s triangle."""
+    upper = np.triu_indices(n)  # row by row, as pack walks it
+    index = np.zeros((n, n), dtype=np.int64)
+    index[upper] = index.T[upper] = np.arange(upper[0].size)
+    return index
 
 
 def _resets(ev: Events, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
@@ -209,7 +220,8 @@ def _forward(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ra
         if still[k] or landed[k]:
             hold_still(x, p, holds[held if keep else 0], still[k])
             held += 1
-        xf[slot], pf[slot] = x, p
+        xf[slot] = x
+        pack(p, pf[slot])
     return xf, pf, updates, holds, gain_h, accepted, loglik, nu
 
 
@@ -227,7 +239,7 @@ def _first_samples(t: FloatArray, who: np.ndarray, n: int) -> FloatArray:
 def _kept(kept: int, n: int, held: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """What :func:`_forward` keeps for the backward pass: ``kept`` states and covariances, the
     ``P H'``, ``S`` and ``y`` of ``kept`` events' samples and of ``held`` events' two holds."""
-    states, covariances = np.zeros((kept, n)), np.zeros((kept, n, n))
+    states, covariances = np.zeros((kept, n)), np.zeros((kept, n * (n + 1) // 2))
     return states, covariances, np.zeros((kept, n + 2)), np.zeros((held, 2, n + 2))
 
 
@@ -326,6 +338,7 @@ def _backward(  # noqa: C901 (one loop: as _forward's, its steps as a helper ran
     fl: Transition = (np.eye(n), links)
     work = scratch(n)
     adjoint = (np.zeros(n), np.zeros((n, n)))  # after the last event: nothing to come
+    p = np.zeros((n, n))  # each event's filtered covariance, unpacked
     lam = adjoint[0]
     unit = np.zeros((2, n))
     unit[0, 0] = unit[1, 1] = 1.0
@@ -333,7 +346,7 @@ def _backward(  # noqa: C901 (one loop: as _forward's, its steps as a helper ran
     var_row = np.full(count, np.nan)
     held = holds.shape[0] if held_at.any() else 0
     for k in range(count - 1, -1, -1):
-        p = pf[k]
+        unpack(pf[k], p)
         # smoothed at k: x_s = x - P lambda;  var = H P H' - (P H')' Lambda (P H')
         var_h[k] = smoothed_variance(p, adjoint[1], unit[0], work)
         if who[k] != TICK:
