@@ -165,9 +165,9 @@ used here: each step carries one scalar measurement of any sensor, or none (a cl
 gated, and the gains per sensor are needed for the contributions. Cost is linear in the
 number of events: 5 us an event over all its passes on a 1-hour flight with its 400 Hz IMU
 and the GPS's velocity (``benchmarks/smoother_bench.py``; 12 us with Rauch-Tung-Striebel's
-O(n^3) gain), 2.8x ``support``'s time on a 300 MB log end to end (8.1-8.4 s against 2.9-3.0 s;
-2.2x before the velocity and its lag state, 3.3x before the compiled passes), 926 MB against
-517 MB (the covariances kept for the backward pass).
+O(n^3) gain), 2.4x ``support``'s time on a 300 MB log end to end (7.0-7.1 s against 2.9-3.0 s;
+3.3x before the compiled passes), 796 MB against 517 MB (the covariances kept for the backward
+pass, their upper triangles: 926 MB whole).
 """
 
 from __future__ import annotations
