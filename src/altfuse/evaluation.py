@@ -138,8 +138,8 @@ def _on_clock(series: Series, referred: Referred) -> FloatArray:
         return h
     h = h - np.median(h[ground])
     for segment in referred.segments:
-        if segment.on_ground_s is None or segment.on_ground_s[0] <= hi <= segment.end_s:
-            continue  # the main segment's ground (referred above), or none of its own
+        if segment.on_ground_s in (None, referred.on_ground_s):
+            continue  # none of its own, or the main segment's ground (referred above)
         own = (t >= segment.on_ground_s[0]) & (t <= segment.on_ground_s[1]) & np.isfinite(h)
         part = (t >= segment.start_s) & (t <= segment.end_s)
         if own.any():

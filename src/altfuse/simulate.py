@@ -53,6 +53,7 @@ HOME_LAT, HOME_LNG = -35.363261, 149.165230  # ArduPilot's simulator home
 GPS_WEEK, GPS_MS_OF_WEEK = 2400, 200_000_000
 BOOT_S = 30.0  # the log's clock starts at boot; the simulated flight starts this much later
 DT_S = 0.01  # truth clock
+GPS_LAG_S = 0.2  # of its altitude and its vertical velocity alike
 GPS_VZ_SIGMA_M_S = 0.1  # a receiver's vertical velocity noise (u-blox: 0.05-0.3 m/s)
 RANGEFINDER_MIN_M = 0.2
 RANGEFINDER_MOUNT_M = 0.25
@@ -341,7 +342,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     # GPS: 5 Hz, 0.2 s lag, AMSL, white noise + random walk, no fix for the first 3 s
     ts = keep("gps", at(5.0))
     fix = ts >= 3.0
-    alt = HOME_AMSL_M + truth(ts, p.height_m, lag_s=0.2)
+    alt = HOME_AMSL_M + truth(ts, p.height_m, lag_s=GPS_LAG_S)
     alt = (
         alt
         + np.cumsum(rng.normal(0.0, 0.05, ts.size))
@@ -370,7 +371,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         alt,
         truth(ts, np.abs(np.gradient(p.distance_m, DT_S))),
         0.0,
-        -(truth(ts, climb, lag_s=0.2) + climb_noise),
+        -(truth(ts, climb, lag_s=GPS_LAG_S) + climb_noise),
         0.0,
         1,
     )

@@ -117,8 +117,8 @@ def _packed_index(n: int) -> np.ndarray:
 def _resets(ev: Events, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
     """The events at which part of the state returns to its prior (a splice: 0 none, else the
     row of ``reset_states`` to return), and those rows, as the kernels take them."""
-    kinds = np.zeros(ev.t.size, dtype=np.int64) if ev.reset is None else ev.reset
-    return kinds.astype(np.int64), reset_states(layout)
+    kinds = np.zeros(ev.t.size) if ev.reset is None else ev.reset
+    return np.asarray(kinds, dtype=np.int64), reset_states(layout)
 
 
 def _dynamics(
