@@ -369,13 +369,38 @@ def test_sensors_that_agree_tighten_the_default_random_walks() -> None:
     h = 20 * np.sin(t / 30)
     agree = np.column_stack([h + rng.normal(0, 0.005, t.size), h + rng.normal(0, 0.005, t.size)])
     res = fuse_smoother(FusionInput.from_heights(agree, 0.1), SmootherParams())
-    assert res.params["q_offset_gps_m2_s"] == pytest.approx(1e-2 * Q_AGREEMENT_MIN_SHARE)
+    # a GPS that agrees with its barometer is taken as stable as it, and both are tightened
+    assert res.params["gps_stable"] == "modelled"
+    assert res.params["q_offset_gps_m2_s"] == pytest.approx(res.params["q_offset_baro_m2_s"])
+    assert res.params["q_offset_gps_m2_s"] < 1e-4 * 2 * Q_AGREEMENT_MIN_SHARE
     wander = agree.copy()
     wander[:, 0] += np.cumsum(rng.normal(0, np.sqrt(0.01 * 0.1), t.size)) + rng.normal(
         0, 0.5, t.size
     )
     res = fuse_smoother(FusionInput.from_heights(wander, 0.1), SmootherParams())
     assert res.params["q_offset_gps_m2_s"] == pytest.approx(0.01)  # the default, untouched
+    assert res.params["gps_stable"].startswith("not modelled")
+
+
+def test_a_gps_that_does_not_wander_is_not_held_to_a_noisy_barometer() -> None:
+    """A GPS as stable as its barometer (an RTK fix, a simulator's) with a noisy barometer
+    whose level errs by 6 cm after a climb (as the 92 m SITL climb's): the two offsets share
+    the step, where the default preference of the barometer's level followed the barometer."""
+    rng = np.random.default_rng(12)
+    t = np.arange(0.0, 120.0, 0.1)
+    h = np.clip((t - 20.0) * 2.0, 0.0, 80.0)
+    gps = h + rng.normal(0, 0.005, t.size)
+    baro = h + 0.06 * (t > 60.0) + rng.normal(0, 0.1, t.size)
+    z = np.column_stack([gps, baro])
+    res = fuse_smoother(FusionInput.from_heights(z, 0.1), SmootherParams())
+    assert res.params["gps_stable"] == "modelled"
+    late = t > 65.0
+    assert np.sqrt(np.mean((res.fused - h)[late] ** 2)) < 0.04  # the step shared: 0.032 m
+    held = fuse_smoother(
+        FusionInput.from_heights(z, 0.1), SmootherParams(offset_noise_m2_s={"gps": 0.01})
+    )
+    assert "gps_stable" not in held.params  # the user's densities are not tested
+    assert np.sqrt(np.mean((held.fused - h)[late] ** 2)) > 0.06  # the barometer's: 0.086 m
 
 
 def test_the_compiled_cache_is_kept_for_one_version_of_the_sources(tmp_path: Path) -> None:

@@ -32,6 +32,9 @@ Q_ACCEL_NO_IMU = 2.0
 #: Offset random walks [m^2/s] for GPS and barometer, and for a rangefinder's ground height when
 #: the horizontal speed is unknown.
 Q_OFFSET = {"gps": 0.01, "baro": 1e-4, "rangefinder": 0.3}
+#: ... and of a GPS as stable as a barometer (an RTK fix; a simulator's GPS, which lags but does
+#: not wander): the alternative the log's evidence may choose (:func:`.evidence.gps_evidence`).
+Q_OFFSET_STABLE_GPS = {**Q_OFFSET, "gps": Q_OFFSET["baro"]}
 #: Ground height under a moving vehicle: random walk per metre flown [m^2/m] when the log cannot
 #: tell, and its floor in time [m^2/s] (grass, waves: about 3 cm over 100 s).
 Q_TERRAIN_PER_M = 0.05
@@ -275,18 +278,21 @@ def bounded_by_agreement(
 
 
 def state_noise(
-    inputs: FusionInput, times: FloatArray, given: Mapping[str, float]
+    inputs: FusionInput,
+    times: FloatArray,
+    given: Mapping[str, float],
+    defaults: Mapping[str, float] = Q_OFFSET,
 ) -> tuple[FloatArray, dict[str, float]]:
     """Random-walk densities of the sensor states over each event interval (events, m), and each
     rangefinder's terrain roughness [m^2/m] by name, for the record.
 
-    ``given`` (by sensor name) overrides. GPS and barometer offsets: ``Q_OFFSET``, constant. A
+    ``given`` (by sensor name) overrides. GPS and barometer offsets: ``defaults``, constant. A
     rangefinder's ground height changes as the vehicle flies over the ground: ``q dx`` per
     distance ``dx`` flown (``q`` by :func:`terrain_noise` against the quietest other sensor) plus
     ``Q_GROUND_STILL`` in time; without a speed, ``Q_OFFSET["rangefinder"]`` in time.
     """
     z, t, kinds, names, speed = inputs.z, inputs.t, inputs.kinds, inputs.names, inputs.speed
-    q_time = np.array([given.get(n, Q_OFFSET[k]) for n, k in zip(names, kinds, strict=True)])
+    q_time = np.array([given.get(n, defaults[k]) for n, k in zip(names, kinds, strict=True)])
     q_time = bounded_by_agreement(inputs, q_time, [n in given for n in names])
     q_events = np.tile(q_time, (times.size, 1))
     terrain: dict[str, float] = {}
