@@ -300,13 +300,16 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         landed, reset_events(times, inputs.splices),
     )  # fmt: skip
     r = noise.r(who)  # before EM: the local noises as they are
-    ev, stable_gain = _gps_stability(inputs, ev, r, layout, params.offset_noise_m2_s)
+    ev, stable_gain, tested = _gps_stability(inputs, ev, r, layout, params.offset_noise_m2_s)
     physical = ev
     if params.offset_noise_m2_s:
         physical = replace(ev, q_state=state_noise(inputs, times, {})[0])
+    plain = layout
     layout, scale_gain = scale_evidence(physical, r, layout, inputs.scale_unknown)
     layout, thermal_gain, chosen = thermal_evidence(physical, r, layout)
-    # the thermal test's pass of the layout chosen, where it was made with these noises
+    if chosen is None and layout is plain:
+        chosen = tested  # the GPS test's pass of this very model, where it ran
+    # the forward pass of the layout chosen, where one was made with these noises
     layout, drift_gain = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
     out = run(ev, noise.r(who), layout)
     floor = ev.q_accel
@@ -394,12 +397,13 @@ def _layout(
 
 def _gps_stability(
     inputs: FusionInput, ev: Events, r: FloatArray, layout: Layout, given: Mapping[str, float]
-) -> tuple[Events, float]:
+) -> tuple[Events, float, dict[str, np.ndarray] | None]:
     """``ev`` with the GPS offsets as stable as a barometer's where the log's evidence asks for
-    it (:func:`.evidence.gps_evidence`), and that evidence; no test (NaN) without a GPS, or
-    where the user gave the offsets' random walks."""
+    it (:func:`.evidence.gps_evidence`), that evidence and the forward pass of the events
+    chosen; no test (NaN, None) without a GPS, or where the user gave the offsets' random
+    walks."""
     if given or "gps" not in inputs.kinds:
-        return ev, math.nan
+        return ev, math.nan, None
     stable, _ = state_noise(inputs, ev.t, {}, Q_OFFSET_STABLE_GPS)
     return gps_evidence(ev, r, layout, stable)
 

@@ -67,9 +67,10 @@ def evidence_gain(without: dict[str, np.ndarray], richer: dict[str, np.ndarray])
 
 def gps_evidence(
     ev: Events, r: FloatArray, layout: Layout, stable: FloatArray
-) -> tuple[Events, float]:
+) -> tuple[Events, float, dict[str, np.ndarray]]:
     """``ev`` with its GPS offsets' random walks as stable as a barometer's (``stable``, the
-    offsets' densities per event) where the log's evidence asks for it, and that evidence.
+    offsets' densities per event) where the log's evidence asks for it, that evidence, and the
+    forward pass of the events chosen.
 
     A GPS's vertical error wanders by about a metre over minutes, and the default prefers the
     barometer's level to it; an RTK fix, or a simulator's GPS, is as stable as the barometer,
@@ -80,8 +81,9 @@ def gps_evidence(
     first: the barometer's tests are made with the offsets chosen here.
     """
     trial = replace(ev, q_state=stable)
-    gain = evidence_gain(likelihood(ev, r, layout), likelihood(trial, r, layout))
-    return (trial if gain > STABLE_GAIN else ev), gain
+    default, richer = likelihood(ev, r, layout), likelihood(trial, r, layout)
+    gain = evidence_gain(default, richer)
+    return (trial, gain, richer) if gain > STABLE_GAIN else (ev, gain, default)
 
 
 def scale_evidence(
