@@ -258,8 +258,8 @@ class SmootherParams(Params):
         help="random-walk density of a sensor's offset (a rangefinder's ground height)",
         unit="m^2/s",
         check="positive",
-        default_text=f"gps {Q_OFFSET['gps']:g}, baro {Q_OFFSET['baro']:g}; rangefinder from the "
-        "terrain and the speed",
+        default_text=f"gps {Q_OFFSET['gps']:g} ({Q_OFFSET_STABLE_GPS['gps']:g} where the log shows "
+        f"it stable), baro {Q_OFFSET['baro']:g}; rangefinder from the terrain and the speed",
     )
 
 
