@@ -38,9 +38,10 @@ THERMAL_GAIN = 3.0
 SCALE_GAIN = 3.0
 #: Log-likelihood gain that takes the GPS's offset as stable as a barometer's: a Bayes factor of
 #: 20, as THERMAL_GAIN (both models have the same states). Measured: the ArduPilot simulators'
-#: logs, whose GPS lags but does not wander, gain 25-222 (their planes' none: the stable model
-#: rejects more samples); PX4's 10-22; altfuse's simulated flights, whose GPS wanders, and the
-#: real logs gain less than 0.1.
+#: copter logs, whose GPS lags but does not wander, gain 25-222 (their planes' none: the stable
+#: model rejects more samples); PX4's simulator logs 0.1-22 (four of five take it); altfuse's
+#: simulated flights, whose GPS wanders, -76 or none; the real logs 2.3 (pymavlink's test log)
+#: or none.
 STABLE_GAIN = 3.0
 #: The richer model may reject this share more of the samples (the temperature model of the
 #: sample mission rejects 2 of 5,371 more, and explains the rest by 25 in log-likelihood).

@@ -289,7 +289,7 @@ def state_noise(
     ``given`` (by sensor name) overrides. GPS and barometer offsets: ``defaults``, constant. A
     rangefinder's ground height changes as the vehicle flies over the ground: ``q dx`` per
     distance ``dx`` flown (``q`` by :func:`terrain_noise` against the quietest other sensor) plus
-    ``Q_GROUND_STILL`` in time; without a speed, ``Q_OFFSET["rangefinder"]`` in time.
+    ``Q_GROUND_STILL`` in time; without a speed, ``defaults["rangefinder"]`` in time.
     """
     z, t, kinds, names, speed = inputs.z, inputs.t, inputs.kinds, inputs.names, inputs.speed
     q_time = np.array([given.get(n, defaults[k]) for n, k in zip(names, kinds, strict=True)])
