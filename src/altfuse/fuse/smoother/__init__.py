@@ -215,6 +215,7 @@ from altfuse.fuse.smoother.noise import (
     em_accel,
     em_scale,
     measurement_noise,
+    offset_noise,
     state_noise,
 )
 from altfuse.fuse.smoother.passes import run
@@ -404,7 +405,11 @@ def _gps_stability(
     walks."""
     if given or "gps" not in inputs.kinds:
         return ev, math.nan, None
-    stable, _ = state_noise(inputs, ev.t, {}, Q_OFFSET_STABLE_GPS)
+    # GPS and barometers take the stable densities (each bounded anew by their agreement); a
+    # rangefinder's ground height keeps its own
+    steady = np.array([kind != "rangefinder" for kind in inputs.kinds])
+    stable = ev.q_state.copy()
+    stable[:, steady] = offset_noise(inputs, {}, Q_OFFSET_STABLE_GPS)[steady]
     return gps_evidence(ev, r, layout, stable)
 
 

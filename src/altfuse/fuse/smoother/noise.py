@@ -277,23 +277,29 @@ def bounded_by_agreement(
     return out
 
 
+def offset_noise(
+    inputs: FusionInput, given: Mapping[str, float], defaults: Mapping[str, float] = Q_OFFSET
+) -> FloatArray:
+    """Each sensor's offset random walk in time [m^2/s]: ``given`` (by sensor name), else its
+    kind's in ``defaults``, bounded by the sensors' agreement (:func:`bounded_by_agreement`)."""
+    names, kinds = inputs.names, inputs.kinds
+    q_time = np.array([given.get(n, defaults[k]) for n, k in zip(names, kinds, strict=True)])
+    return bounded_by_agreement(inputs, q_time, [n in given for n in names])
+
+
 def state_noise(
-    inputs: FusionInput,
-    times: FloatArray,
-    given: Mapping[str, float],
-    defaults: Mapping[str, float] = Q_OFFSET,
+    inputs: FusionInput, times: FloatArray, given: Mapping[str, float]
 ) -> tuple[FloatArray, dict[str, float]]:
     """Random-walk densities of the sensor states over each event interval (events, m), and each
     rangefinder's terrain roughness [m^2/m] by name, for the record.
 
-    ``given`` (by sensor name) overrides. GPS and barometer offsets: ``defaults``, constant. A
-    rangefinder's ground height changes as the vehicle flies over the ground: ``q dx`` per
-    distance ``dx`` flown (``q`` by :func:`terrain_noise` against the quietest other sensor) plus
-    ``Q_GROUND_STILL`` in time; without a speed, ``defaults["rangefinder"]`` in time.
+    ``given`` (by sensor name) overrides. GPS and barometer offsets: :func:`offset_noise`,
+    constant. A rangefinder's ground height changes as the vehicle flies over the ground:
+    ``q dx`` per distance ``dx`` flown (``q`` by :func:`terrain_noise` against the quietest other
+    sensor) plus ``Q_GROUND_STILL`` in time; without a speed, ``Q_OFFSET["rangefinder"]`` in time.
     """
     z, t, kinds, names, speed = inputs.z, inputs.t, inputs.kinds, inputs.names, inputs.speed
-    q_time = np.array([given.get(n, defaults[k]) for n, k in zip(names, kinds, strict=True)])
-    q_time = bounded_by_agreement(inputs, q_time, [n in given for n in names])
+    q_time = offset_noise(inputs, given)
     q_events = np.tile(q_time, (times.size, 1))
     terrain: dict[str, float] = {}
     ranges = [i for i, k in enumerate(kinds) if k == "rangefinder" and names[i] not in given]
