@@ -66,10 +66,11 @@ def contributions(
     total = share.sum(axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         weights = np.where(total > 0, share / total, np.nan)
-    # a tick with no update since the previous one keeps the previous contributions
-    for k in range(1, z.shape[0]):
-        if not np.isfinite(weights[k]).all():
-            weights[k] = weights[k - 1]
+    # a tick with no update since the previous one keeps the previous contributions: each
+    # tick takes the row of the last tick up to it whose row is whole (the first tick's own
+    # row if none is)
+    whole = np.isfinite(weights).all(axis=1)
+    weights = weights[np.maximum.accumulate(np.where(whole, np.arange(whole.size), 0))]
     # a sensor absent from the clock at a tick (a gap longer than --max-gap) gets no weight there,
     # though its samples near the gap still informed the smoother
     present = np.isfinite(z)
