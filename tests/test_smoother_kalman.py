@@ -12,6 +12,8 @@ of the same estimate.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter, rts_smoother
@@ -30,7 +32,7 @@ from altfuse.fuse.smoother.model import (
     reset_states,
     transition,
 )
-from altfuse.fuse.smoother.passes import run
+from altfuse.fuse.smoother.passes import likelihood, likelihoods, run
 
 M = 2  # sensors: a GPS and a barometer, the barometer with a drift rate
 
@@ -173,3 +175,18 @@ def test_the_kernels_know_every_entry_of_f_off_its_diagonal(
     off = {(int(i), int(k)) for i, k in zip(*np.nonzero(f - np.eye(layout.n)), strict=True)}
     assert off == {(int(i), int(k)) for i, k in couplings(use_bias, drifts)}
     assert len(off) == 1 + 2 * use_bias + len(drifting)
+
+
+def test_passes_run_at_once_give_the_passes_run_one_by_one() -> None:
+    # the evidence tests run their two forward passes in threads: the same arrays read at once,
+    # each pass its own outputs
+    ev, layout, r = toy(0, accel=True)
+    ev = replace(ev, gate=1.5)  # a gate that rejects some samples, differently per model
+    plain = Layout(np.ones(M), ())
+    together = likelihoods((ev, r, layout), (ev, r, plain), (ev, r * 4, plain))
+    alone = [likelihood(ev, r, layout), likelihood(ev, r, plain), likelihood(ev, r * 4, plain)]
+    assert len({int(one["accepted"].sum()) for one in alone}) > 1
+    for mine, theirs in zip(together, alone, strict=True):
+        assert mine.keys() == theirs.keys()
+        for key in mine:
+            np.testing.assert_array_equal(mine[key], theirs[key])

@@ -17,7 +17,7 @@ from altfuse.fuse.smoother.model import (
     scales_agree,
     scales_to_learn,
 )
-from altfuse.fuse.smoother.passes import likelihood, run
+from altfuse.fuse.smoother.passes import likelihood, likelihoods, run
 from altfuse.model import FloatArray
 
 #: Log-likelihood gain that adds the drift rates: half the chi-square (1 dof) 0.1 % point. A
@@ -82,7 +82,7 @@ def gps_evidence(
     first: the barometer's tests are made with the offsets chosen here.
     """
     trial = replace(ev, q_state=stable)
-    default, richer = likelihood(ev, r, layout), likelihood(trial, r, layout)
+    default, richer = likelihoods((ev, r, layout), (trial, r, layout))
     gain = evidence_gain(default, richer)
     return (trial, gain, richer) if gain > STABLE_GAIN else (ev, gain, default)
 
@@ -130,7 +130,7 @@ def thermal_evidence(
     if not layout.has("thermal"):
         return layout, math.nan, None
     plain = layout.without("thermal")
-    without, richer = likelihood(physical, r, plain), likelihood(physical, r, layout)
+    without, richer = likelihoods((physical, r, plain), (physical, r, layout))
     gain = evidence_gain(without, richer)
     return (layout, gain, richer) if gain > THERMAL_GAIN else (plain, gain, without)
 
@@ -148,10 +148,11 @@ def drift_evidence(
     if "baro" not in kinds:
         return layout, math.nan
     drifting = layout.with_drift(kinds)
-    gain = evidence_gain(
-        stable if stable is not None else likelihood(ev, r, layout),
-        likelihood(ev, r, drifting),
-    )
+    if stable is None:
+        stable, richer = likelihoods((ev, r, layout), (ev, r, drifting))
+    else:
+        richer = likelihood(ev, r, drifting)
+    gain = evidence_gain(stable, richer)
     return (drifting if gain > DRIFT_GAIN else layout), gain
 
 
