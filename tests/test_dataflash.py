@@ -152,8 +152,11 @@ def test_the_land_detector_is_read_from_stat() -> None:
     assert landed.source == "STAT.isFlying == 0"
     m = mavutil.mavlink_connection(str(path))
     flying = []
-    while (msg := m.recv_match(type="STAT")) is not None:
-        flying.append(msg.isFlying)
+    try:
+        while (msg := m.recv_match(type="STAT")) is not None:
+            flying.append(msg.isFlying)
+    finally:
+        m.close()
     np.testing.assert_array_equal(landed.value, 1.0 - np.array(flying, dtype=float))
     assert landed.value[0] == 1.0
     assert landed.value[-1] == 0.0
