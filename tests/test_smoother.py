@@ -205,6 +205,26 @@ def test_a_barometer_scale_the_datum_cannot_tell_is_learnt_where_the_log_asks(
         assert "scale_error_baro" not in params
 
 
+def test_the_sensors_unknown_latency_widens_the_band_by_the_climb_rate() -> None:
+    """fused_std adds |v| times the latency's sigma in quadrature, at the smoothed velocity;
+    the estimate itself does not move."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 60.0, 0.1)
+    truth = np.where(t < 20.0, 0.0, np.minimum(t - 20.0, 20.0) * 2.0)  # a 2 m/s climb to 40 m
+    z = truth[:, None] + rng.normal(0.0, 0.05, (t.size, 2))
+    accel = np.zeros(t.size)
+    inputs = FusionInput.from_heights(z, 0.1, kinds=("gps", "baro"), accel_up=accel)
+    exact = fuse_smoother(inputs, SmootherParams(timing_sigma_s=0.0))
+    late = fuse_smoother(inputs, SmootherParams(timing_sigma_s=0.01))
+    np.testing.assert_array_equal(late.fused, exact.fused)
+    v = late.tick_traces["velocity"]
+    widened = late.tick_traces["fused_std"] ** 2 - exact.tick_traces["fused_std"] ** 2
+    np.testing.assert_allclose(widened, (0.01 * v) ** 2, rtol=1e-9, atol=1e-15)
+    climbing = (t > 25.0) & (t < 35.0)
+    assert np.median(np.abs(v[climbing])) == pytest.approx(2.0, abs=0.1)
+    assert late.params["timing_sigma_s"] == 0.01
+
+
 def test_a_step_in_every_sensor_without_acceleration_is_followed() -> None:
     """Issue 15: 5 m in every sensor at once, the accelerometer still (a spliced log, a reset):
     the gate rejects every sample, and after LOCKOUT_S the estimate is let loose, not locked
