@@ -149,7 +149,7 @@ check reads 0.1-1.3 where the +-2 sigma coverage runs from 0.63 to 1.00; the vel
 
 Measured (``benchmarks/smoother_accuracy.py``, 159 simulated flights): the lowest RMSE of all
 methods on every one (the closest: the hover with seed 0 and its barometer 7 % high, 0.498 m
-against support's 0.529); 95.7 % of the true errors within +-2 ``fused_std`` over all, 0.17
+against support's 0.529); 96.1 % of the true errors within +-2 ``fused_std`` over all, 0.18
 to 1.00 per flight (the lowest on the hovers whose barometer reads 7 % high: the scale is not
 learnt there). On the simulators' 13 truth logs
 (``benchmarks/truth_accuracy.py``, README "Accuracy"): RMSE and maximum error within the
@@ -172,8 +172,9 @@ gated, and the gains per sensor are needed for the contributions. Cost is linear
 number of events: 5 us an event over all its passes on a 1-hour flight with its 400 Hz IMU
 and the GPS's velocity (``benchmarks/smoother_bench.py``; 12 us with Rauch-Tung-Striebel's
 O(n^3) gain), 2.4x ``support``'s time on a 300 MB log end to end (7.0-7.1 s against 2.9-3.0 s;
-3.3x before the compiled passes), 796 MB against 517 MB (the covariances kept for the backward
-pass, their upper triangles: 926 MB whole).
+3.3x before the compiled passes; 2.6x on a machine half as fast, the evidence tests' two passes
+run at once in two threads: 3.0x before), 796 MB against 517 MB (the covariances kept for the
+backward pass, their upper triangles: 926 MB whole).
 """
 
 from __future__ import annotations
@@ -239,7 +240,7 @@ NIS_CHECK = 2.0
 #: log tells: against the accelerometer the fit is flat in the lag (a 305 m SITL climb: RMS
 #: 0.024 m at 0 and at the best lag). Measured against the ArduPilot simulators' truth, the
 #: fused height lags by -7 to +12 ms (0.9 on the Solo's, 7-12 on nine copters): at 2.5 m/s,
-#: 2 cm, beyond a +-2 sigma of 1 cm, so that a climb's band covered 0.35 of its errors. It
+#: 1.7 cm, beyond the model's 2 sigma of 1.5 cm (the 305 m climb's climbs were covered 0.35). It
 #: adds ``(v sigma)^2`` to the height's variance (``v`` the smoothed vertical velocity); the
 #: estimate is unchanged. 4 ms by the worst log of the 13 truth logs (README "Accuracy"): with
 #: 0, coverage 0.68 at worst (9 of 13 within 0.90-0.99); 4 ms, 0.87 (9 of 13); 5 ms, 0.90-1.00
