@@ -11,6 +11,7 @@ from click.testing import CliRunner
 from pymavlink import mavutil
 
 from altfuse.cli import cli
+from altfuse.inertial import vertical_acceleration
 from altfuse.io import read_log
 from altfuse.simulate import BOOT_S, FAULTS, HOME_AMSL_M, SCENARIOS, simulate_flight
 from conftest import ROOT
@@ -100,7 +101,11 @@ def test_paper_a_scenario_baro_departs_in_its_segment() -> None:
     assert (sim.profile.baro_error_m[~inside] == 0).all()
 
 
-@pytest.mark.parametrize("fault", FAULTS)
+#: The faults with a test of their own below.
+OWN_TESTS = ("roll-flip",)
+
+
+@pytest.mark.parametrize("fault", [f for f in FAULTS if f not in OWN_TESTS])
 def test_faults(fault: str, tmp_path: Path) -> None:
     clean = read_log(_write(tmp_path / "clean.bin", "mission", []))
     faulty = read_log(_write(tmp_path / "faulty.bin", "mission", [fault]))
@@ -147,6 +152,33 @@ def test_faults(fault: str, tmp_path: Path) -> None:
         assert b["rangefinder"].value.size > 0
     else:  # baro-drift: 0.05 m/s from 40 % of the flight
         assert (b["baro"].value - a["baro"].value)[-1] == pytest.approx(0.05 * 72, abs=0.1)
+
+
+def test_a_roll_flip_wraps_the_logged_roll_and_keeps_the_vertical_acceleration(
+    tmp_path: Path,
+) -> None:
+    """One turn about the roll axis in 1 s, logged in [-180, 180) as ArduPilot logs it."""
+    clean = read_log(_write(tmp_path / "clean.bin", "mission", []))
+    flip = read_log(_write(tmp_path / "flip.bin", "mission", ["roll-flip"]))
+    assert clean.attitude is not None
+    assert clean.imu is not None
+    assert flip.attitude is not None
+    assert flip.imu is not None
+    roll = np.rad2deg(flip.attitude.roll)
+    assert roll.min() >= -180.0
+    assert roll.max() < 180.0
+    assert np.sum(np.abs(np.diff(roll)) > 180.0) == 1  # wrapped once, through +-180
+    turned = np.unwrap(flip.attitude.roll) - np.unwrap(clean.attitude.roll)
+    assert np.rad2deg(turned[-1]) == pytest.approx(360.0, abs=1e-3)
+    # upside down the rangefinder sees the sky: out of range
+    a, b = ({s.name: s for s in log.sensors}["rangefinder"] for log in (clean, flip))
+    assert b.dropped["Stat != 4 (not Good)"] >= a.dropped.get("Stat != 4 (not Good)", 0) + 5
+    # read back, the flip is the attitude it is: the vertical acceleration stays the clean
+    # flight's but for the attitude's interpolation between its 10 Hz samples (0.4 m/s^2;
+    # through 0 degrees instead of +-180, 17.7)
+    _, a_clean = vertical_acceleration(clean.imu, clean.attitude)
+    _, a_flip = vertical_acceleration(flip.imu, flip.attitude)
+    assert np.abs(a_flip - a_clean).max() < 1.0
 
 
 def _write(path: Path, scenario: str, faults: list[str]) -> Path:

@@ -29,7 +29,10 @@ angles), ``imu-clip`` (a shock: five consecutive IMU samples pinned at the 16 g 
 false velocity, too long for a median of its neighbours to call a spike), ``imu-25hz`` (the IMU
 logged at 25 Hz, as older and busier logs do); and two of the other sensors:
 ``baro-scale`` (the barometer 7 % high over the flight: a warm sensor) and ``rangefinder-low``
-(mounted 0.1 m up, below its 0.2 m minimum: OutOfRangeLow on the ground).
+(mounted 0.1 m up, below its 0.2 m minimum: OutOfRangeLow on the ground); and ``roll-flip`` (a
+full turn about the roll axis in 1 s, as aerobatic and tumbling logs show: the logged roll, in
+[-180, 180) degrees as ArduPilot logs it, wraps through +-180, and the rangefinder, pointing at
+the sky, reads out of range).
 """
 
 from __future__ import annotations
@@ -276,6 +279,7 @@ FAULTS = (
     "imu-25hz",
     "baro-scale",
     "rangefinder-low",
+    "roll-flip",
 )
 #: The accelerometer's range [m/s^2]: ArduPilot's IMUs clip at 16 g.
 IMU_CLIP_M_S2 = 16.0 * G
@@ -284,6 +288,8 @@ BARO_SCALE = 1.07
 #: The rangefinder's mount height with ``rangefinder-low``: below its minimum range, so that
 #: on the ground it reads OutOfRangeLow.
 RANGEFINDER_LOW_MOUNT_M = 0.1
+#: How long the turn of ``roll-flip`` takes [s] (540 deg/s at its fastest).
+FLIP_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -339,6 +345,11 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     def keep(name: str, times: FloatArray) -> FloatArray:
         return times[times < 0.5 * duration] if f"lose-{name}" in faults else times
 
+    roll = p.roll
+    if "roll-flip" in faults:  # one turn: the attitude after it is the one before
+        lo, _ = _fault_window(duration, 0.35, FLIP_S)
+        roll = roll + 2 * np.pi * _smoothstep((t - lo) / FLIP_S)
+
     # GPS: 5 Hz, 0.2 s lag, AMSL, white noise + random walk, no fix for the first 3 s
     ts = keep("gps", at(5.0))
     fix = ts >= 3.0
@@ -389,9 +400,11 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     # rangefinder: 20 Hz along the body axis, out-of-range codes as drivers log them
     ts = keep("rangefinder", at(20.0))
     ground = p.terrain(truth(ts, p.distance_m))
-    tilt = np.cos(truth(ts, p.roll)) * np.cos(truth(ts, p.pitch))
+    tilt = np.cos(truth(ts, roll)) * np.cos(truth(ts, p.pitch))
     mount = RANGEFINDER_LOW_MOUNT_M if "rangefinder-low" in faults else RANGEFINDER_MOUNT_M
-    dist = (truth(ts, p.height_m) - ground + mount) / tilt
+    # pointing above the horizon it sees no ground: beyond its maximum
+    dist = np.full(ts.size, np.inf)
+    np.divide(truth(ts, p.height_m) - ground + mount, tilt, out=dist, where=tilt > 0)
     dist = dist + truth(ts, p.rangefinder_sigma_m) * rng.normal(0.0, 1.0, ts.size)
     stat = np.where(dist > p.rangefinder_max_m, 3, np.where(dist < RANGEFINDER_MIN_M, 2, 4))
     dist = np.clip(dist, RANGEFINDER_MIN_M, p.rangefinder_max_m)
@@ -411,7 +424,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
 
     # IMU: 50 Hz (or 25) specific force in FRD, with bias and noise
     ts = at(25.0 if "imu-25hz" in faults else 50.0)
-    r, pitch = truth(ts, p.roll), truth(ts, p.pitch)
+    r, pitch = truth(ts, roll), truth(ts, p.pitch)
     acc_up = np.gradient(np.gradient(p.height_m, DT_S), DT_S)
     f_down = -(G + truth(ts, acc_up))
     # f_body = R_ned_to_body @ (0, 0, f_down), yaw 0
@@ -431,10 +444,12 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     log("IMU", ts, 0, *f_body)
 
     ts = at(10.0)
-    roll_logged = np.rad2deg(truth(ts, p.roll))
+    roll_logged = np.rad2deg(truth(ts, roll))
     if "attitude-error" in faults:
         lo, hi = _fault_window(duration, 0.55, 10.0)
         roll_logged = roll_logged + np.where((ts >= lo) & (ts < hi), 30.0, 0.0)
+    wrapped = (roll_logged + 180.0) % 360.0 - 180.0  # as logged: in [-180, 180)
+    roll_logged = np.where(np.abs(roll_logged) > 180.0, wrapped, roll_logged)
     log("ATT", ts, roll_logged, np.rad2deg(truth(ts, p.pitch)), 0.0)
     log("SIM", ts, HOME_AMSL_M + truth(ts, p.height_m))
     return SimulatedFlight(scenario, seed, duration, tuple(faults), p, records)
