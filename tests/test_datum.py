@@ -11,6 +11,7 @@ from altfuse.align import Aligned
 from altfuse.datum import refer_to_takeoff
 from altfuse.fuse import FusionInput
 from altfuse.fuse.support import SupportParams, fuse_support
+from altfuse.model import Samples
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
 
@@ -241,3 +242,24 @@ def test_a_segment_resumed_in_flight_keeps_the_main_datum() -> None:
     ref = refer_to_takeoff(aligned, splices=[110.0])
     assert ref.segments[1].datum == "the main segment's offsets (no take-off in it)"
     np.testing.assert_allclose(ref.h[:, 0], refer_to_takeoff(aligned).h[:, 0])  # the GPS
+
+
+def test_a_segment_resumed_in_a_cruise_that_climbs_keeps_the_main_datum() -> None:
+    """Resumed in flight at 10 m, the second segment climbs 2 m at 130 s: to the heights alone
+    a take-off from a ground at 10 m. The GPS says the vehicle flew at 5 m/s through that
+    "ground": the main segment's offsets, not a datum 10 m up; where it stood (0.2 m/s), its
+    own."""
+    aligned, h = two_flights(second_takes_off=False)
+    t = aligned.t
+    climb = np.interp(t, [130.0, 140.0], [0.0, 2.0]) * (t >= 110)
+    z = aligned.z + climb[:, None]
+    aligned = Aligned(t, aligned.names, aligned.kinds, z, 10.0, 1.0, "union", {})
+    flying = Samples(t, np.where(t >= 110, 5.0, 0.0))
+    ref = refer_to_takeoff(aligned, splices=[110.0], speed=flying)
+    assert ref.segments[1].datum == "the main segment's offsets (no take-off in it)"
+    gps = ref.h[:, 0]
+    late = t >= 150
+    assert np.nanmedian(gps[late] - (h + climb)[late]) == pytest.approx(0.0, abs=0.3)
+    standing = Samples(t, np.where((t >= 110) & (t < 135), 0.2, 5.0))
+    own = refer_to_takeoff(aligned, splices=[110.0], speed=standing)
+    assert own.segments[1].datum.startswith("its own, ground before take-off at 13")

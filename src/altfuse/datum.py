@@ -52,6 +52,11 @@ MIN_WINDOW_TICKS = 3
 #: there: its valid readings are the noise's tail above the minimum, biased high (a mount 0.1 m
 #: up under a 0.2 m minimum gave an offset of 0.29 m), and its datum is found as without any.
 RANGEFINDER_GROUND_SHARE = 0.5
+#: A segment of a spliced log has a ground of its own only where the GPS says the vehicle stood
+#: in its ground window: a median ground speed at most this [m/s]. A log resumed in a cruise
+#: over hills rises 1 m, as a take-off does, after 5 s flown at 5 m/s: referred to that
+#: "ground", the mission's last segment read 16 m below its take-off point on landing.
+GROUND_MAX_SPEED_M_S = 1.0
 #: The ground window ends this long before the detected take-off [s].
 TAKEOFF_MARGIN_S = 1.0
 #: The vehicle is taken to stand still until this long before the detected take-off [s]: a gentle
@@ -248,21 +253,24 @@ def detect_takeoff(
     return float(t[above[0]]) if above.size else None
 
 
-def refer_to_takeoff(
+def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what the log tells)
     aligned: Aligned,
     ground_window_s: float = 5.0,
     takeoff_climb_m: float = 1.0,
     referral: Referral = "full",
+    *,
     clearances: Mapping[str, float] | None = None,
     splices: Sequence[float] = (),
+    speed: Samples | None = None,
 ) -> Referred:
     """Subtract from each source its offset (and scale) to height above take-off, segment by
     segment (see module doc).
 
     ``splices`` are the times [s] at which a new segment of the log starts (a reboot, a log
     resumed: :func:`altfuse.align.splices`). The segment with the most valid ticks is referred
-    as a whole log is; another with its own take-off gets its own datum, one without (a log
-    resumed in flight) the main segment's offsets and scales.
+    as a whole log is; another with its own take-off, from a ground window in which the GPS's
+    ground ``speed`` (where the log has one) says the vehicle stood, gets its own datum; one
+    without (a log resumed in flight) the main segment's offsets and scales.
     """
     t = aligned.t
     cuts = [0, *np.searchsorted(t, np.asarray(splices, dtype=np.float64)).tolist(), t.size]
@@ -278,7 +286,7 @@ def refer_to_takeoff(
     segments = []
     for a, b in pieces:
         part = aligned.part(a, b)
-        own = None if (a, b) == main else _own_datum(part, *options)
+        own = None if (a, b) == main else _own_datum(part, *options, speed)
         grounded, still = True, None
         if (a, b) == main:
             h[a:b], how, still = first.h, "the main segment's", first.on_ground_s
@@ -304,13 +312,23 @@ def _own_datum(
     takeoff_climb_m: float,
     referral: Referral,
     clearances: Mapping[str, float] | None,
+    speed: Samples | None,
 ) -> Referred | None:
-    """A segment's own referral, where it has a take-off and a ground window before it."""
+    """A segment's own referral, where it has a take-off and a ground window before it, and
+    the vehicle stood in that window where the GPS's ground ``speed`` tells (see
+    ``GROUND_MAX_SPEED_M_S``)."""
     try:
         own = _refer_segment(part, ground_window_s, takeoff_climb_m, referral, clearances)
     except NoUsableSensorsError:
         return None
-    return own if own.on_real_ground else None
+    if not own.on_real_ground:
+        return None
+    if speed is not None:
+        lo, hi = own.ground_window_s
+        inside = (speed.t >= lo) & (speed.t <= hi) & np.isfinite(speed.value)
+        if inside.any() and np.median(speed.value[inside]) > GROUND_MAX_SPEED_M_S:
+            return None
+    return own
 
 
 def _refer_segment(

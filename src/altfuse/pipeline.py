@@ -155,8 +155,9 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
         options.ground_window_s,
         options.takeoff_climb_m,
         options.referral,
-        ground_clearances(flight),
-        splices(aligned, None if flight.imu is None else flight.imu.t),
+        clearances=ground_clearances(flight),
+        splices=splices(aligned, None if flight.imu is None else flight.imu.t),
+        speed=_samples(flight.ground_speed),
     )
     log.info(
         "%s: aligned %d ticks in %.2f s, datum in %.2f s",

@@ -11,6 +11,7 @@ from typing import Literal
 
 import numpy as np
 
+from altfuse.datum import GROUND_MAX_SPEED_M_S
 from altfuse.fuse.smoother.compiled import compiled
 from altfuse.fuse.smoother.events import TICK, VELOCITY
 from altfuse.fuse.smoother.kalman import innovation, update
@@ -45,9 +46,8 @@ Q_DRIFT = 1e-5
 #: coverage 95.2 -> 95.0 %, within 10 % of the best on the same 158 of 159.
 STILL_SIGMA = 0.005
 #: The autopilot's landed verdict is trusted this long [s] inside each of its landed spans, and
-#: while the GPS says the vehicle moves slower than LANDED_MAX_SPEED_M_S [m/s].
+#: while the GPS says the vehicle moves slower than GROUND_MAX_SPEED_M_S.
 LANDED_MARGIN_S = 2.0
-LANDED_MAX_SPEED_M_S = 1.0
 #: What a splice resets (the rows of :func:`reset_states`): nothing, where the vehicle is (a
 #: log resumed in flight, its sensors' offsets the main segment's), and where the vehicle is
 #: with every sensor's offset and drift (a segment referred to its own ground).
@@ -126,7 +126,7 @@ def landed_events(
     """The clock ticks at which the vehicle stands on the ground by the autopilot's own land
     detector (``landed``: PX4's ``vehicle_land_detected``, ArduPilot's ``STAT.isFlying``), each
     landed span less ``LANDED_MARGIN_S`` at either end (a detector decides with a delay), and
-    not where the GPS says it rolls faster than ``LANDED_MAX_SPEED_M_S`` (a plane taxiing on a
+    not where the GPS says it rolls faster than ``GROUND_MAX_SPEED_M_S`` (a plane taxiing on a
     sloping field climbs with it). There the smoother holds v = 0."""
     out = np.zeros(times.size, dtype=bool)
     if landed is None or landed.t.size == 0:
@@ -140,7 +140,7 @@ def landed_events(
     out &= who == -1
     if speed is not None and speed.t.size:
         order = np.argsort(speed.t, kind="stable")
-        rolling = np.interp(times, speed.t[order], speed.value[order]) > LANDED_MAX_SPEED_M_S
+        rolling = np.interp(times, speed.t[order], speed.value[order]) > GROUND_MAX_SPEED_M_S
         out &= ~rolling
     return out
 
