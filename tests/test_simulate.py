@@ -102,7 +102,7 @@ def test_paper_a_scenario_baro_departs_in_its_segment() -> None:
 
 
 #: The faults with a test of their own below.
-OWN_TESTS = ("roll-flip",)
+OWN_TESTS = ("roll-flip", "splice")
 
 
 @pytest.mark.parametrize("fault", [f for f in FAULTS if f not in OWN_TESTS])
@@ -179,6 +179,27 @@ def test_a_roll_flip_wraps_the_logged_roll_and_keeps_the_vertical_acceleration(
     _, a_clean = vertical_acceleration(clean.imu, clean.attitude)
     _, a_flip = vertical_acceleration(flip.imu, flip.attitude)
     assert np.abs(a_flip - a_clean).max() < 1.0
+
+
+def test_a_spliced_log_has_nothing_logged_for_20_s_from_half_the_flight(tmp_path: Path) -> None:
+    """Every record stops at 60 s of the mission's 120 and resumes at 80 s, the flight going
+    on meanwhile: a log stopped and resumed."""
+    path = _write(tmp_path / "spliced.bin", "mission", ["splice"])
+    reader = mavutil.mavlink_connection(str(path))
+    types = ["GPS", "BARO", "RFND", "IMU", "ATT", "SIM"]
+    times: dict[str, list[float]] = {}
+    try:
+        while (msg := reader.recv_match(type=types)) is not None:
+            times.setdefault(msg.get_type(), []).append(msg.TimeUS / 1e6 - BOOT_S)
+    finally:
+        reader.close()
+    assert set(times) == set(types)
+    for name, ts in times.items():
+        t = np.array(ts)
+        assert not ((t >= 60.0) & (t < 80.0)).any(), name
+        assert (t < 60.0).any(), name
+        assert t.max() > 110.0, name
+        assert np.diff(t).max() == pytest.approx(20.0, abs=0.25), name
 
 
 def _write(path: Path, scenario: str, faults: list[str]) -> Path:

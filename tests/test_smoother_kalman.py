@@ -26,6 +26,7 @@ from altfuse.fuse.smoother.model import (
     Layout,
     Regressor,
     couplings,
+    first_height,
     measurement_matrix,
     prior,
     process_noise,
@@ -82,12 +83,14 @@ def filterpy_passes(
         u = np.array([[0.5 * ev.a[k] * dt * dt], [ev.a[k] * dt]])
         if ev.reset is not None and ev.reset[k]:
             # the prediction alone, then the splice: F = 0 and Q the prior's on the states
-            # that return to it, their prior mean through the input (h's; the rest is 0)
+            # that return to it, their prior mean through the input (h's, from the segment's
+            # first samples; the rest is 0)
             steps.append((k, f, q, u, np.zeros((1, n)), None, 1.0))
             back = reset_states(layout)[ev.reset[k]]
             f = np.diag(np.where(back, 0.0, 1.0))
             q = np.where(np.outer(back, back), p0, 0.0)
-            u = np.array([[x0[0] if back[0] else 0.0], [x0[1] if back[1] else 0.0]])
+            h_guess = first_height(ev.who, ev.z, k, ev.h0)
+            u = np.array([[h_guess if back[0] else 0.0], [x0[1] if back[1] else 0.0]])
         row = np.zeros((1, n))
         i = ev.who[k]
         if i >= 0:

@@ -32,7 +32,8 @@ logged at 25 Hz, as older and busier logs do); and two of the other sensors:
 (mounted 0.1 m up, below its 0.2 m minimum: OutOfRangeLow on the ground); and ``roll-flip`` (a
 full turn about the roll axis in 1 s, as aerobatic and tumbling logs show: the logged roll, in
 [-180, 180) degrees as ArduPilot logs it, wraps through +-180, and the rangefinder, pointing at
-the sky, reads out of range).
+the sky, reads out of range); and ``splice`` (nothing logged for 20 s from half the flight, the
+vehicle flying on: a log stopped and resumed, or cut and joined).
 """
 
 from __future__ import annotations
@@ -280,6 +281,7 @@ FAULTS = (
     "baro-scale",
     "rangefinder-low",
     "roll-flip",
+    "splice",
 )
 #: The accelerometer's range [m/s^2]: ArduPilot's IMUs clip at 16 g.
 IMU_CLIP_M_S2 = 16.0 * G
@@ -290,6 +292,8 @@ BARO_SCALE = 1.07
 RANGEFINDER_LOW_MOUNT_M = 0.1
 #: How long the turn of ``roll-flip`` takes [s] (540 deg/s at its fastest).
 FLIP_S = 1.0
+#: How long nothing is logged with ``splice`` [s], from half the flight.
+SPLICE_S = 20.0
 
 
 @dataclass(frozen=True)
@@ -338,9 +342,15 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     def truth(ts: FloatArray, values: FloatArray, lag_s: float = 0.0) -> FloatArray:
         return np.interp(ts - lag_s, t, values)
 
+    # with splice, nothing is logged for SPLICE_S while the vehicle flies on
+    paused = _fault_window(duration, 0.5, SPLICE_S) if "splice" in faults else (np.inf, np.inf)
+
     def log(name: str, times: FloatArray, *columns: FloatArray | float) -> None:
-        cols = [np.broadcast_to(np.asarray(c), times.shape) for c in columns]
-        records[name] = [(float(ti), tuple(c[k] for c in cols)) for k, ti in enumerate(times)]
+        logged = (times < paused[0]) | (times >= paused[1])
+        cols = [np.broadcast_to(np.asarray(c), times.shape)[logged] for c in columns]
+        records[name] = [
+            (float(ti), tuple(c[k] for c in cols)) for k, ti in enumerate(times[logged])
+        ]
 
     def keep(name: str, times: FloatArray) -> FloatArray:
         return times[times < 0.5 * duration] if f"lose-{name}" in faults else times

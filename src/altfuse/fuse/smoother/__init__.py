@@ -59,9 +59,11 @@ errors of 2-7 cm, coverage 1.00; now 0.027 m, 0.97).
 A spliced log (the datum's segments, :func:`altfuse.datum.refer_to_takeoff`) starts afresh at
 each later segment's first event (:func:`.kalman.restart`; the backward pass carries nothing
 back across it): ``h`` and ``v`` return to their prior, nothing saying where the vehicle went
-meanwhile, and where the segment was referred to a ground (its own or the main one's) every
-sensor's offset and drift rate too, each 0 at that ground, where ``h = 0`` and ``v = 0`` hold
-as on the main one. The accelerometer's bias and the regressors are the sensors' own, and kept.
+meanwhile (``h`` centred on the segment's own first samples, :func:`.model.first_height`: on
+the log's first guess, a plane resumed at 300 m had every sample gated 30 sigma away), and
+where the segment was referred to a ground (its own or the main one's) every sensor's offset
+and drift rate too, each 0 at that ground, where ``h = 0`` and ``v = 0`` hold as on the main
+one. The accelerometer's bias and the regressors are the sensors' own, and kept.
 Bridged by the model instead, a real log's barometer drift rate carried 1.8 m over a 10-minute
 pause, and the fused height sat that far above both sensors after it (0.10 m since).
 
@@ -200,6 +202,7 @@ from altfuse.fuse.smoother.model import (
     Events,
     Layout,
     datum_priors,
+    first_height,
     landed_events,
     reset_events,
     still_events,
@@ -312,13 +315,12 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     noise = measurement_noise(inputs, params.sigma_m, (who, position), velocity)
     still = still_events(times, who, inputs.on_ground_s)
     a, q_added = _accelerometer(inputs, times)
-    first = [s.value[0] for s in samples if s.value.size]
-    h0 = float(np.median(first)) if first else 0.0
     layout = _layout(inputs, (times, who, position), bool(still.any()), accel if use_imu else None)
     q_events, terrain = state_noise(inputs, times, params.offset_noise_m2_s)
     landed = landed_events(times, who, inputs.landed, inputs.speed) & ~still
     ev = Events(
-        times, who, values, a, q_events, still, q_accel + q_added, use_imu, params.gate_sigma, h0,
+        times, who, values, a, q_events, still, q_accel + q_added, use_imu, params.gate_sigma,
+        first_height(who, values),
         landed, reset_events(times, inputs.splices),
     )  # fmt: skip
     r = noise.r(who)  # before EM: the local noises as they are

@@ -120,6 +120,19 @@ def reset_events(times: FloatArray, splices: Sequence[tuple[float, bool]]) -> np
     return out
 
 
+def first_height(who: np.ndarray, z: FloatArray, start: int = 0, default: float = 0.0) -> float:
+    """A height guess from event ``start`` on: the median of each sensor's first sample there
+    (``who``, ``z``: the events' series and values), ``default`` where none has one. Where the
+    log starts, and where a segment of a spliced log does: nothing says where the vehicle went
+    meanwhile, and a guess from before the splice (300 m off after a plane's pause in its
+    cruise) shuts the gate on every sensor."""
+    series = who[start:]
+    sensors = np.unique(series[series >= 0])
+    if sensors.size == 0:
+        return default
+    return float(np.median([z[start + int(np.argmax(series == i))] for i in sensors]))
+
+
 def landed_events(
     times: FloatArray, who: np.ndarray, landed: Samples | None, speed: Samples | None
 ) -> np.ndarray:

@@ -29,6 +29,7 @@ from altfuse.fuse.smoother.model import (
     Events,
     Layout,
     couplings,
+    first_height,
     hold_still,
     measurement_matrix,
     prior,
@@ -64,7 +65,9 @@ def run(ev: Events, r: FloatArray, layout: Layout, smooth: bool = True) -> dict[
     h, who = measured[4], measured[1]
     if smooth:
         held = ground[0] | ground[1]
-        var_h, var_row = _backward(ev.t, (xf, pf, updates, holds, held), (who, h), dynamics, resets)
+        var_h, var_row = _backward(
+            ev.t, (xf, pf, updates, holds, held), (who, h), dynamics, resets[:2]
+        )
     else:
         var_h = pf[:, 0].copy()  # the packed triangle's first entry: P[0, 0]
         full = pf[:, _packed_index(layout.n)]
@@ -124,11 +127,15 @@ def _packed_index(n: int) -> np.ndarray:
     return index
 
 
-def _resets(ev: Events, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
+def _resets(ev: Events, layout: Layout) -> tuple[np.ndarray, np.ndarray, FloatArray]:
     """The events at which part of the state returns to its prior (a splice: 0 none, else the
-    row of ``reset_states`` to return), and those rows, as the kernels take them."""
-    kinds = np.zeros(ev.t.size) if ev.reset is None else ev.reset
-    return np.asarray(kinds, dtype=np.int64), reset_states(layout)
+    row of ``reset_states`` to return), those rows, and the height the prior takes there (the
+    segment's :func:`first_height`; NaN at other events), as the kernels take them."""
+    kinds = np.asarray(np.zeros(ev.t.size) if ev.reset is None else ev.reset, dtype=np.int64)
+    heights = np.full(ev.t.size, np.nan)
+    for k in np.flatnonzero(kinds):
+        heights[k] = first_height(ev.who, ev.z, int(k), ev.h0)
+    return kinds, reset_states(layout), heights
 
 
 def _dynamics(
@@ -148,7 +155,7 @@ def _forward(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ra
     dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray],
     ground: tuple[np.ndarray, np.ndarray],
     gate: float,
-    start: tuple[FloatArray, FloatArray, np.ndarray, np.ndarray],
+    start: tuple[FloatArray, FloatArray, np.ndarray, np.ndarray, FloatArray],
     keep: bool,
 ) -> tuple[
     FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray, FloatArray, FloatArray
@@ -165,7 +172,8 @@ def _forward(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ra
     rate) state pairs, whether the bias is a state and F's entries off its diagonal;
     ``ground``: the events held at the datum (h = 0 and v = 0) and standing elsewhere on the
     ground (v = 0); ``start``: the prior, and per event the row of the states (``start[3]``,
-    row 0: none) that return to it there (a splice); ``keep``: whether to keep the states,
+    row 0: none) that return to it there (a splice) and the height they return to
+    (``start[4]``); ``keep``: whether to keep the states,
     covariances and updates (else one slot, overwritten).
     """
     t, who, z, r, h = measured
@@ -202,8 +210,9 @@ def _forward(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ra
             transition(fl[0], dt, use_bias, drifts)
             process_noise(q, dt, q_accel[k], q_state[k], use_bias, drifts)
             predict(x, p, fl, q, u, work)
-        if reset[k] > 0:  # a splice: part of the state returns to the prior
-            restart(x, p, (start[0], start[1]), returning[reset[k]])
+        if reset[k] > 0:  # a splice: part of the state returns to the prior, the height
+            restart(x, p, (start[0], start[1]), returning[reset[k]])  # (every row's first)
+            x[0] = start[4][k]  # to the segment's own first guess
         i = who[k]
         slot = k if keep else 0
         if i != TICK:
