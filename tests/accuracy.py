@@ -20,7 +20,12 @@ from altfuse.evaluation import Evaluation, choose_truth
 from altfuse.fuse import METHODS, FusionResult
 from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, prepare, run_method
-from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
+from altfuse.simulate import (
+    SCENARIOS,
+    applicable_faults,
+    simulate_flight,
+    write_simulated_log,
+)
 
 Flight = tuple[str, int, tuple[str, ...]]
 
@@ -31,7 +36,7 @@ def flights(seeds: Sequence[int]) -> list[Flight]:
     out: list[Flight] = []
     for seed in seeds:
         out += [(s, seed, ()) for s in SCENARIOS]
-        out += [(s, seed, (f,)) for s in SCENARIOS for f in FAULTS]
+        out += [(s, seed, (f,)) for s in SCENARIOS for f in applicable_faults(s)]
         out.append(("mission", seed, ("gps-glitch", "rangefinder-dropout")))
     return out
 

@@ -17,7 +17,7 @@ from pymavlink import DFReader
 
 from altfuse.io.dataflash import WANTED_TYPES, _Records
 from altfuse.io.fastdf import index_file
-from altfuse.simulate import FAULTS, simulate_flight, write_simulated_log
+from altfuse.simulate import applicable_faults, simulate_flight, write_simulated_log
 from conftest import ROOT, SHARED_LOGS, ardupilot_logs, shared_log
 
 
@@ -64,7 +64,8 @@ def test_sample_logs(log: Path) -> None:
 def test_fresh_simulator_output_with_every_fault(tmp_path: Path) -> None:
     for scenario in ("hover", "paper-a"):
         path = tmp_path / f"{scenario}.bin"
-        write_simulated_log(simulate_flight(scenario, seed=9, faults=FAULTS), path)
+        faults = applicable_faults(scenario)
+        write_simulated_log(simulate_flight(scenario, seed=9, faults=faults), path)
         assert_parity(path)
 
 

@@ -13,7 +13,16 @@ from pymavlink import mavutil
 from altfuse.cli import cli
 from altfuse.inertial import vertical_acceleration
 from altfuse.io import read_log
-from altfuse.simulate import BOOT_S, FAULTS, HOME_AMSL_M, SCENARIOS, simulate_flight
+from altfuse.simulate import (
+    BOOT_S,
+    DROP_M,
+    FAULTS,
+    HOME_AMSL_M,
+    IMU_CLIP_M_S2,
+    RESTITUTION,
+    SCENARIOS,
+    simulate_flight,
+)
 from conftest import ROOT
 
 REGENERATE = ROOT / "sample_logs" / "regenerate.sh"
@@ -102,7 +111,7 @@ def test_paper_a_scenario_baro_departs_in_its_segment() -> None:
 
 
 #: The faults with a test of their own below.
-OWN_TESTS = ("roll-flip", "splice")
+OWN_TESTS = ("roll-flip", "splice", "hard-landing")
 
 
 @pytest.mark.parametrize("fault", [f for f in FAULTS if f not in OWN_TESTS])
@@ -200,6 +209,43 @@ def test_a_spliced_log_has_nothing_logged_for_20_s_from_half_the_flight(tmp_path
         assert (t < 60.0).any(), name
         assert t.max() > 110.0, name
         assert np.diff(t).max() == pytest.approx(20.0, abs=0.25), name
+
+
+def test_a_hard_landing_falls_the_last_metre_bounces_and_clips_the_accelerometer() -> None:
+    """The motors cut at 1 m on the last descent: free fall (the accelerometer reads no specific
+    force), an impact at 4.2-4.5 m/s clipped at the IMU's 16 g, a bounce of RESTITUTION."""
+    clean = simulate_flight("mission", 3)
+    hard = simulate_flight("mission", 3, faults=("hard-landing",))
+    t, h = hard.profile.t, hard.profile.height_m
+    first = int(np.flatnonzero(h > DROP_M)[-1]) + 1
+    touch = first + int(np.argmax(np.diff(h[first:]) > 0))  # the lowest tick: the impact
+    impact = float(h[touch - 1] - h[touch]) / float(t[touch] - t[touch - 1])
+    assert 4.0 < impact < 5.0  # sqrt(v0^2 + 2 g 1 m)
+    bounce = h[touch:].max()
+    assert bounce == pytest.approx((RESTITUTION * impact) ** 2 / (2 * 9.80665), rel=0.15)
+    np.testing.assert_array_equal(h[:first], clean.profile.height_m[:first])
+    assert h[-1] == 0.0
+    # the log: one IMU sample pinned at the range on the impact, free fall just before it
+    imu = np.array([(ts, *row[1:]) for ts, row in hard.records["IMU"]])
+    pinned = np.isclose(imu[:, 3], -IMU_CLIP_M_S2)
+    assert pinned.sum() >= 1
+    assert t[touch] - 0.03 <= imu[pinned, 0].min() <= t[touch] + 0.03
+    falling = (imu[:, 0] > t[first] + 0.1) & (imu[:, 0] < t[touch] - 0.05)
+    assert np.abs(imu[falling, 3]).max() < 1.0  # 0 g, and the sensor's noise and bias
+    # the truth logged is the flight flown
+    sim = np.array([row[0] for _, row in hard.records["SIM"]]) - HOME_AMSL_M
+    assert sim.min() >= -1e-9
+
+
+def test_a_hard_landing_needs_a_scenario_that_lands(tmp_path: Path) -> None:
+    result = CliRunner().invoke(
+        cli, ["simulate", "hover", "-o", str(tmp_path / "h.bin"), "--fault", "hard-landing"]
+    )
+    assert result.exit_code == 2
+    assert "hover does not land: hard-landing needs one of paper-a, mission, climb" in (
+        result.output
+    )
+    assert not (tmp_path / "h.bin").exists()
 
 
 def _write(path: Path, scenario: str, faults: list[str]) -> Path:

@@ -13,7 +13,8 @@ sensor is when; shared sensor models turn it into the records an ArduPilot log h
   ``Stat`` 4 (Good) within range, 2 (OutOfRangeLow) below 0.2 m with ``Dist`` at 0.2 m, 3
   (OutOfRangeHigh) above its maximum with ``Dist`` pinned at the maximum, as many drivers log;
   its ``RNGFND1_MIN_CM``, ``_MAX_CM`` and ``_GNDCLEAR`` (the mount height) in ``PARM`` records.
-- IMU, 50 Hz, specific force in FRD with a 0.05 m/s² bias on Z and 0.15 m/s² noise; ATT, 10 Hz.
+- IMU, 50 Hz, specific force in FRD with a 0.05 m/s² bias on Z and 0.15 m/s² noise, clipped at
+  its ±16 g range; ATT, 10 Hz.
 - SIM, 10 Hz: the true altitude AMSL, as ArduPilot's simulator logs it.
 
 Scenarios (``SCENARIOS``): ``paper-a`` (Paper A's experiment: level flight near 15 m, the
@@ -33,13 +34,16 @@ logged at 25 Hz, as older and busier logs do); and two of the other sensors:
 full turn about the roll axis in 1 s, as aerobatic and tumbling logs show: the logged roll, in
 [-180, 180) degrees as ArduPilot logs it, wraps through +-180, and the rangefinder, pointing at
 the sky, reads out of range); and ``splice`` (nothing logged for 20 s from half the flight, the
-vehicle flying on: a log stopped and resumed, or cut and joined).
+vehicle flying on: a log stopped and resumed, or cut and joined); and ``hard-landing`` (the
+motors cut 1 m above the ground on the last descent: a fall, an impact the accelerometer clips
+at its 16 g range, and a bounce; not on the hover, which does not land).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
@@ -250,19 +254,39 @@ def climb(t: FloatArray, duration_s: float) -> Profile:
     )
 
 
+def _hard_landing(t: FloatArray, h: FloatArray) -> FloatArray:
+    """``h`` with its last descent cut at DROP_M: a fall from there onto the ground (h = 0) and
+    bounces, each at RESTITUTION of the impact's speed, until the vehicle rests. The first impact
+    reverses 5.5-6 m/s within a few 10 ms steps of the truth's clock: 23-27 g, clipped at the
+    IMU's 16 g."""
+    k = int(np.flatnonzero(h > DROP_M)[-1]) + 1  # the first tick below DROP_M on the way down
+    out: FloatArray = h.copy()
+    out[k:] = 0.0
+    t0, z0, v0 = t[k - 1], float(h[k - 1]), float(h[k] - h[k - 1]) / DT_S
+    while True:
+        s_hit = (v0 + math.sqrt(v0 * v0 + 2 * G * z0)) / G  # z0 + v0 s - G s^2 / 2 = 0
+        arc = (t >= t0) & (t < t0 + s_hit)
+        s = t[arc] - t0
+        out[arc] = z0 + v0 * s - 0.5 * G * s * s
+        t0, z0, v0 = t0 + s_hit, 0.0, RESTITUTION * (G * s_hit - v0)
+        if v0 < SETTLE_M_S:
+            return out
+
+
 @dataclass(frozen=True)
 class Scenario:
     name: str
     make: Callable[[FloatArray, float], Profile]
     default_duration_s: float
     min_duration_s: float
+    lands: bool = True  # its last descent reaches the ground
 
 
 SCENARIOS: dict[str, Scenario] = {
     s.name: s
     for s in (
         Scenario("paper-a", paper_a, 75.0, 75.0),
-        Scenario("hover", hover, 180.0, 120.0),
+        Scenario("hover", hover, 180.0, 120.0, lands=False),
         Scenario("mission", mission, 120.0, 60.0),
         Scenario("climb", climb, 150.0, 120.0),
     )
@@ -282,7 +306,10 @@ FAULTS = (
     "rangefinder-low",
     "roll-flip",
     "splice",
+    "hard-landing",
 )
+#: The faults that need a scenario that lands.
+LANDING_FAULTS = ("hard-landing",)
 #: The accelerometer's range [m/s^2]: ArduPilot's IMUs clip at 16 g.
 IMU_CLIP_M_S2 = 16.0 * G
 #: A barometer's scale error with ``baro-scale``: 7 % high, as the simulators' climbs show.
@@ -294,6 +321,12 @@ RANGEFINDER_LOW_MOUNT_M = 0.1
 FLIP_S = 1.0
 #: How long nothing is logged with ``splice`` [s], from half the flight.
 SPLICE_S = 20.0
+#: ``hard-landing``: the height [m] at which the motors cut on the last descent, and the share of
+#: its speed the vehicle keeps, upwards, at each impact (its legs' restitution); it rests once
+#: it bounces slower than SETTLE_M_S.
+DROP_M = 1.0
+RESTITUTION = 0.3
+SETTLE_M_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -306,6 +339,12 @@ class SimulatedFlight:
     faults: tuple[str, ...]
     profile: Profile
     records: Records
+
+
+def applicable_faults(scenario: str) -> tuple[str, ...]:
+    """The faults ``scenario`` can take: all but LANDING_FAULTS where it does not land."""
+    lands = SCENARIOS[scenario].lands
+    return tuple(f for f in FAULTS if lands or f not in LANDING_FAULTS)
 
 
 def _fault_window(duration_s: float, start: float, length_s: float) -> tuple[float, float]:
@@ -331,6 +370,9 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     unknown = [f for f in faults if f not in FAULTS]
     if unknown:
         raise ParameterError(f"unknown fault {unknown[0]!r}; choose from {', '.join(FAULTS)}")
+    if landing := [f for f in faults if f not in applicable_faults(scenario)]:
+        landers = ", ".join(n for n, s in SCENARIOS.items() if s.lands)
+        raise ParameterError(f"{scenario} does not land: {landing[0]} needs one of {landers}")
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration, DT_S)
     p = spec.make(t, duration)
@@ -355,10 +397,11 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     def keep(name: str, times: FloatArray) -> FloatArray:
         return times[times < 0.5 * duration] if f"lose-{name}" in faults else times
 
-    roll = p.roll
     if "roll-flip" in faults:  # one turn: the attitude after it is the one before
         lo, _ = _fault_window(duration, 0.35, FLIP_S)
-        roll = roll + 2 * np.pi * _smoothstep((t - lo) / FLIP_S)
+        p = replace(p, roll=p.roll + 2 * np.pi * _smoothstep((t - lo) / FLIP_S))
+    if "hard-landing" in faults:
+        p = replace(p, height_m=_hard_landing(t, p.height_m))
 
     # GPS: 5 Hz, 0.2 s lag, AMSL, white noise + random walk, no fix for the first 3 s
     ts = keep("gps", at(5.0))
@@ -410,7 +453,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     # rangefinder: 20 Hz along the body axis, out-of-range codes as drivers log them
     ts = keep("rangefinder", at(20.0))
     ground = p.terrain(truth(ts, p.distance_m))
-    tilt = np.cos(truth(ts, roll)) * np.cos(truth(ts, p.pitch))
+    tilt = np.cos(truth(ts, p.roll)) * np.cos(truth(ts, p.pitch))
     mount = RANGEFINDER_LOW_MOUNT_M if "rangefinder-low" in faults else RANGEFINDER_MOUNT_M
     # pointing above the horizon it sees no ground: beyond its maximum
     dist = np.full(ts.size, np.inf)
@@ -434,7 +477,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
 
     # IMU: 50 Hz (or 25) specific force in FRD, with bias and noise
     ts = at(25.0 if "imu-25hz" in faults else 50.0)
-    r, pitch = truth(ts, roll), truth(ts, p.pitch)
+    r, pitch = truth(ts, p.roll), truth(ts, p.pitch)
     acc_up = np.gradient(np.gradient(p.height_m, DT_S), DT_S)
     f_down = -(G + truth(ts, acc_up))
     # f_body = R_ned_to_body @ (0, 0, f_down), yaw 0
@@ -446,6 +489,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         ]
     )
     f_body = f_body + rng.normal(0.0, 0.15, (3, ts.size)) + np.array([[0.0], [0.0], [0.05]])
+    f_body = np.clip(f_body, -IMU_CLIP_M_S2, IMU_CLIP_M_S2)  # the sensor's range
     if "imu-impact" in faults:  # up is -Z in FRD
         f_body[2, np.searchsorted(ts, 0.45 * duration)] -= 25.0 * G
     if "imu-clip" in faults:  # a shock up, five samples pinned at the sensor's range
@@ -454,7 +498,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     log("IMU", ts, 0, *f_body)
 
     ts = at(10.0)
-    roll_logged = np.rad2deg(truth(ts, roll))
+    roll_logged = np.rad2deg(truth(ts, p.roll))
     if "attitude-error" in faults:
         lo, hi = _fault_window(duration, 0.55, 10.0)
         roll_logged = roll_logged + np.where((ts >= lo) & (ts < hi), 30.0, 0.0)
