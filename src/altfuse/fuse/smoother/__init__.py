@@ -149,9 +149,9 @@ not see every error: a random-walk offset absorbs a slow one (on the simulators'
 check reads 0.1-1.3 where the +-2 sigma coverage runs from 0.63 to 1.00; the velocity's
 0.01-0.3, its floor above its noise there).
 
-Measured (``benchmarks/smoother_accuracy.py``, 183 simulated flights): the lowest RMSE of all
+Measured (``benchmarks/smoother_accuracy.py``, 192 simulated flights): the lowest RMSE of all
 methods on every one (the closest: the hover with seed 0 and its barometer 7 % high, 0.498 m
-against support's 0.529); 96.6 % of the true errors within +-2 ``fused_std`` over all, 0.18
+against support's 0.529); 96.7 % of the true errors within +-2 ``fused_std`` over all, 0.18
 to 1.00 per flight (the lowest on the hovers whose barometer reads 7 % high: the scale is not
 learnt there). On the simulators' 13 truth logs
 (``benchmarks/truth_accuracy.py``, README "Accuracy"): RMSE and maximum error within the
