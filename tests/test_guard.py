@@ -109,7 +109,7 @@ def test_a_divergence_is_warned_in_one_line_and_reported_by_evaluate_and_batch(
     assert result.exit_code == 0, result.output
     warnings = [line for line in result.stderr.splitlines() if "diverged" in line]
     assert warnings == [
-        "altfuse: warning: hover.bin: delay1 left every sensor on 1635 ticks (by up to 113.3 m): "
+        "altfuse: warning: hover.bin: delay1 left every sensor on 1635 ticks (by up to 113.2 m): "
         "status 'diverged'"
     ]
     table = pd.read_csv(out)

@@ -78,7 +78,7 @@ def _variant(sim: SimulatedFlight, type_name: str, index: int, values: tuple[obj
         del records[type_name][index]
     else:
         records[type_name][index] = (t, values)
-    return SimulatedFlight(sim.scenario, sim.seed, sim.duration_s, sim.faults, sim.profile, records)
+    return replace(sim, records=records)
 
 
 def _fused(sim: SimulatedFlight, path: Path) -> tuple[pd.DataFrame, dict[str, object]]:
@@ -112,7 +112,7 @@ def test_a_rangefinder_pinned_at_its_maximum_is_rejected_and_moves_nothing(tmp_p
     liar["RFND"] = [(t, (v[0], v[1], 4, v[3])) if v[2] == 3 else (t, v) for t, v in rfnd]
     honest = {k: list(v) for k, v in sim.records.items()}
     honest["RFND"] = [(t, v) for t, v in rfnd if v[2] != 3]
-    make = lambda r: SimulatedFlight(sim.scenario, sim.seed, sim.duration_s, (), sim.profile, r)  # noqa: E731
+    make = lambda r: replace(sim, faults=(), records=r)  # noqa: E731
     dirty, meta = _fused(make(liar), tmp_path / "dirty.bin")
     clean, _ = _fused(make(honest), tmp_path / "clean.bin")
     used = next(s for s in meta["sensors_used"] if s["name"] == "rangefinder")
@@ -288,7 +288,7 @@ def test_an_accelerometer_saturated_everywhere_is_no_accelerometer(tmp_path: Pat
     sim = simulate_flight("mission", seed=4)
     records = {k: list(v) for k, v in sim.records.items()}
     records["IMU"] = [(t, (v[0], v[1], 3.4e38, v[3])) for t, v in records["IMU"]]
-    broken = SimulatedFlight(sim.scenario, sim.seed, sim.duration_s, (), sim.profile, records)
+    broken = replace(sim, faults=(), records=records)
     table, meta, stderr = _fused_with(broken, tmp_path / "sat.bin", "smoother")
     assert np.isfinite(table["fused_alt_m"]).all()
     assert str(meta["parameters"]["model"]).startswith("altitude-only")  # type: ignore[index]
@@ -301,7 +301,7 @@ def _shifted(sim: SimulatedFlight, after_share: float, by_s: float) -> Simulated
     records = {
         k: [(t + by_s if t >= cut else t, v) for t, v in recs] for k, recs in sim.records.items()
     }
-    return SimulatedFlight(sim.scenario, sim.seed, sim.duration_s, (), sim.profile, records)
+    return replace(sim, faults=(), records=records)
 
 
 def test_records_days_later_are_dropped_not_a_clock_of_millions_of_ticks(tmp_path: Path) -> None:

@@ -13,15 +13,19 @@ from pymavlink import mavutil
 from altfuse.cli import cli
 from altfuse.inertial import vertical_acceleration
 from altfuse.io import read_log
+from altfuse.pipeline import FuseOptions, prepare
 from altfuse.simulate import (
     BOOT_S,
     DROP_M,
     FAULTS,
+    GPS_LAG_S,
     HOME_AMSL_M,
     IMU_CLIP_M_S2,
+    LATENCY_S,
     RESTITUTION,
     SCENARIOS,
     simulate_flight,
+    write_simulated_log,
 )
 from conftest import ROOT
 
@@ -209,6 +213,38 @@ def test_a_spliced_log_has_nothing_logged_for_20_s_from_half_the_flight(tmp_path
         assert (t < 60.0).any(), name
         assert t.max() > 110.0, name
         assert np.diff(t).max() == pytest.approx(20.0, abs=0.25), name
+
+
+def test_every_sensor_lags_the_truth_by_the_flight_s_latency() -> None:
+    """Drawn per flight from the seed: each sensor fits the truth best that far behind it (the
+    barometer and the rangefinder in the climb's 18 m/s, where 1 ms is 2 cm), the GPS by its
+    own lag besides."""
+    flights = [simulate_flight("climb", seed) for seed in (0, 1, 2)]
+    assert len({f.latency_s for f in flights}) == 3
+    for flight in flights:
+        assert LATENCY_S[0] <= flight.latency_s <= LATENCY_S[1]
+        lag = flight.gps_lag_s - flight.latency_s
+        assert GPS_LAG_S[0] <= lag <= GPS_LAG_S[1]
+        p = flight.profile
+        baro = np.array([(ts, row[1]) for ts, row in flight.records["BARO"]])
+        temp = np.array([row[2] for _, row in flight.records["BARO"]])
+        clean = baro[:, 1] - 0.12 * (temp - 25.0)  # the thermal drift, as simulated
+        candidates = np.arange(0.0, 0.02, 0.0005)
+        misfit = [
+            np.mean((clean - np.interp(baro[:, 0] - lag, p.t, p.height_m)) ** 2)
+            for lag in candidates
+        ]
+        assert candidates[int(np.argmin(misfit))] == pytest.approx(flight.latency_s, abs=0.002)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_gps_lag_drawn_is_the_one_altfuse_finds_in_the_log(tmp_path: Path, seed: int) -> None:
+    """The GPS lags the other sensors by 0.1-0.25 s, drawn per flight: the pipeline's estimate
+    (:func:`altfuse.align.gps_lags`, against the barometer) finds it."""
+    flight = simulate_flight("climb", seed)
+    write_simulated_log(flight, tmp_path / "climb.bin")
+    lags = prepare(read_log(tmp_path / "climb.bin"), FuseOptions()).lags
+    assert lags["gps"].lag_s == pytest.approx(flight.gps_lag_s - flight.latency_s, abs=0.03)
 
 
 def test_a_hard_landing_falls_the_last_metre_bounces_and_clips_the_accelerometer() -> None:

@@ -140,8 +140,8 @@ def _rmse_by_method(name: str) -> dict[str, float]:
     [("hover.bin", 0.3), ("mission.bin", 0.3), ("mission_faults.bin", 0.3), ("paper_a.bin", 0.3)],
 )
 def test_on_the_sample_flights_it_beats_every_other_method(name: str, ratio: float) -> None:
-    """Measured: hover 0.036 m vs 0.377 (support); mission 0.056 vs 0.384; mission_faults (GPS
-    glitch + rangefinder dropout) 0.041 vs 0.552; paper_a 0.016 vs 0.236."""
+    """Measured: hover 0.051 m vs 0.370 (support); mission 0.050 vs 0.386; mission_faults (GPS
+    glitch + rangefinder dropout) 0.048 vs 0.553; paper_a 0.017 vs 0.216 (multilayer)."""
     rmse = _rmse_by_method(name)
     best_other = min(v for k, v in rmse.items() if k != "smoother")
     assert rmse["smoother"] < ratio * best_other
@@ -211,15 +211,17 @@ def test_a_log_resumed_in_flight_is_fused_from_where_its_sensors_say_the_vehicle
     """The plane's log paused for 20 s in its cruise at 300 m, resumed in flight: at the
     splice the height returns to the prior, centred on the segment's own first samples. Centred
     on the log's first guess (0 m +- 10 m), every sample was gated 30 sigma away and six ticks
-    were written 300 m below every sensor (16.6 m RMSE; unspliced 0.011)."""
-    log = tmp_path / "climb.bin"
-    write_simulated_log(simulate_flight("climb", 0, faults=("splice",)), log)
-    result = evaluate(log, ["smoother"], truth="sim")
-    assert len(result.prepared.referred.segments) == 2
-    rmse = next(r.overall.rmse for r in result.rows if r.name == "smoother")
-    assert rmse < 0.02  # 0.011
-    status = result.runs["smoother"].result.status
-    assert not (status == "diverged").any()
+    were written 300 m below every sensor (16.6 m RMSE; unspliced 0.011, both before the
+    simulator's sensors lagged; now 0.044 against 0.041)."""
+    rmse = {}
+    for faults in ((), ("splice",)):
+        log = tmp_path / f"climb{len(faults)}.bin"
+        write_simulated_log(simulate_flight("climb", 0, faults=faults), log)
+        result = evaluate(log, ["smoother"], truth="sim")
+        assert len(result.prepared.referred.segments) == 2 * len(faults)
+        rmse[faults] = next(r.overall.rmse for r in result.rows if r.name == "smoother")
+        assert not (result.runs["smoother"].result.status == "diverged").any()
+    assert rmse[("splice",)] < 1.2 * rmse[()]
 
 
 def test_the_sensors_unknown_latency_widens_the_band_by_the_climb_rate() -> None:

@@ -694,9 +694,13 @@ def simulate(
                departing, then every sensor scattering (75 s)
       hover    Paper B's experiment: a climb to 240 m and a hover (180 s)
       mission  take-off, climb, cruise over hills, landing (120 s)
+      climb    a plane's: a climb to 300 m at up to 18 m/s, banked turns, a
+               descent (150 s)
 
-    GPS (5 Hz, 0.2 s lag, AMSL), barometer (20 Hz, drifting with temperature), rangefinder
-    (20 Hz, Stat and out-of-range codes), IMU (50 Hz, biased) and attitude (10 Hz).
+    GPS (5 Hz, 0.1-0.25 s lag, AMSL), barometer (20 Hz, drifting with temperature),
+    rangefinder (20 Hz, Stat and out-of-range codes), IMU (50 Hz, biased, clipped at
+    16 g) and attitude (10 Hz), every one 5-12 ms behind the truth (SIM); the lags are
+    drawn per flight from the seed.
 
     \b
     Example:

@@ -1,9 +1,11 @@
 """Simulated flights with known true altitude, written as genuine DataFlash logs.
 
 A scenario gives the truth (height above take-off, distance flown, attitude) and how noisy each
-sensor is when; shared sensor models turn it into the records an ArduPilot log holds:
+sensor is when; shared sensor models turn it into the records an ArduPilot log holds, each
+sensor behind the truth by a latency drawn per flight from ``LATENCY_S`` (as the ArduPilot
+simulators' sensors lag their own), the GPS by a further lag drawn from ``GPS_LAG_S``:
 
-- GPS, 5 Hz, altitude AMSL (home at ``HOME_AMSL_M``), 0.2 s lag, white noise plus a slow random
+- GPS, 5 Hz, altitude AMSL (home at ``HOME_AMSL_M``), lagging, white noise plus a slow random
   walk; no fix (Status 1, altitude 12 m off) for its first 3 s. Its vertical velocity (``VZ``,
   down) with the same lag (a receiver reports both for one epoch; ArduPilot's EKF3 applies one
   ``EK3_GPS_DELAY`` to both) and ``GPS_VZ_SIGMA_M_S`` of white noise.
@@ -61,7 +63,14 @@ HOME_LAT, HOME_LNG = -35.363261, 149.165230  # ArduPilot's simulator home
 GPS_WEEK, GPS_MS_OF_WEEK = 2400, 200_000_000
 BOOT_S = 30.0  # the log's clock starts at boot; the simulated flight starts this much later
 DT_S = 0.01  # truth clock
-GPS_LAG_S = 0.2  # of its altitude and its vertical velocity alike
+#: The GPS's lag behind the other sensors [s], of its altitude and its vertical velocity alike,
+#: drawn per flight from this range (receivers lag 0.1-0.25 s: EK3_GPS_DELAY's 220 ms)...
+GPS_LAG_S = (0.1, 0.25)
+#: ... and every sensor's common latency behind the log's timestamps [s] (the time between the
+#: air or the ground being sampled and the sample being stamped), drawn likewise: the
+#: ArduPilot simulators' sensors lag their own truth (SIM) by 7-12 ms on nine of their ten
+#: copter logs shared.
+LATENCY_S = (0.005, 0.012)
 GPS_VZ_SIGMA_M_S = 0.1  # a receiver's vertical velocity noise (u-blox: 0.05-0.3 m/s)
 RANGEFINDER_MIN_M = 0.2
 RANGEFINDER_MOUNT_M = 0.25
@@ -331,7 +340,8 @@ SETTLE_M_S = 0.1
 
 @dataclass(frozen=True)
 class SimulatedFlight:
-    """The truth on the ``DT_S`` clock and the records to log, by type."""
+    """The truth on the ``DT_S`` clock, the records to log by type, and how far the sensors lag
+    the truth [s]: every one (``latency_s``), the GPS (``gps_lag_s``, the latency included)."""
 
     scenario: str
     seed: int
@@ -339,6 +349,8 @@ class SimulatedFlight:
     faults: tuple[str, ...]
     profile: Profile
     records: Records
+    latency_s: float
+    gps_lag_s: float
 
 
 def applicable_faults(scenario: str) -> tuple[str, ...]:
@@ -403,10 +415,16 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     if "hard-landing" in faults:
         p = replace(p, height_m=_hard_landing(t, p.height_m))
 
-    # GPS: 5 Hz, 0.2 s lag, AMSL, white noise + random walk, no fix for the first 3 s
+    # every sensor's common latency behind the log's timestamps, and the GPS's own lag: from
+    # their own stream, every other draw stays as it was
+    timing = np.random.default_rng((seed, 2))
+    latency = timing.uniform(*LATENCY_S)
+    gps_lag = latency + timing.uniform(*GPS_LAG_S)
+
+    # GPS: 5 Hz, lagging, AMSL, white noise + random walk, no fix for the first 3 s
     ts = keep("gps", at(5.0))
     fix = ts >= 3.0
-    alt = HOME_AMSL_M + truth(ts, p.height_m, lag_s=GPS_LAG_S)
+    alt = HOME_AMSL_M + truth(ts, p.height_m, lag_s=gps_lag)
     alt = (
         alt
         + np.cumsum(rng.normal(0.0, 0.05, ts.size))
@@ -435,7 +453,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         alt,
         truth(ts, np.abs(np.gradient(p.distance_m, DT_S))),
         0.0,
-        -(truth(ts, climb, lag_s=GPS_LAG_S) + climb_noise),
+        -(truth(ts, climb, lag_s=gps_lag) + climb_noise),
         0.0,
         1,
     )
@@ -444,7 +462,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     ts = keep("baro", at(20.0))
     temp = 25.0 + 10.0 * (1 - np.exp(-ts / 60.0))
     scale = BARO_SCALE if "baro-scale" in faults else 1.0
-    alt = scale * truth(ts, p.height_m) + 0.12 * (temp - 25.0) + truth(ts, p.baro_error_m)
+    alt = scale * truth(ts, p.height_m, latency) + 0.12 * (temp - 25.0) + truth(ts, p.baro_error_m)
     alt = alt + truth(ts, p.baro_sigma_m) * rng.normal(0.0, 1.0, ts.size)
     if "baro-drift" in faults:
         alt = alt + 0.05 * np.clip(ts - 0.4 * duration, 0.0, None)
@@ -452,12 +470,12 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
 
     # rangefinder: 20 Hz along the body axis, out-of-range codes as drivers log them
     ts = keep("rangefinder", at(20.0))
-    ground = p.terrain(truth(ts, p.distance_m))
-    tilt = np.cos(truth(ts, p.roll)) * np.cos(truth(ts, p.pitch))
+    ground = p.terrain(truth(ts, p.distance_m, latency))
+    tilt = np.cos(truth(ts, p.roll, latency)) * np.cos(truth(ts, p.pitch, latency))
     mount = RANGEFINDER_LOW_MOUNT_M if "rangefinder-low" in faults else RANGEFINDER_MOUNT_M
     # pointing above the horizon it sees no ground: beyond its maximum
     dist = np.full(ts.size, np.inf)
-    np.divide(truth(ts, p.height_m) - ground + mount, tilt, out=dist, where=tilt > 0)
+    np.divide(truth(ts, p.height_m, latency) - ground + mount, tilt, out=dist, where=tilt > 0)
     dist = dist + truth(ts, p.rangefinder_sigma_m) * rng.normal(0.0, 1.0, ts.size)
     stat = np.where(dist > p.rangefinder_max_m, 3, np.where(dist < RANGEFINDER_MIN_M, 2, 4))
     dist = np.clip(dist, RANGEFINDER_MIN_M, p.rangefinder_max_m)
@@ -477,9 +495,9 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
 
     # IMU: 50 Hz (or 25) specific force in FRD, with bias and noise
     ts = at(25.0 if "imu-25hz" in faults else 50.0)
-    r, pitch = truth(ts, p.roll), truth(ts, p.pitch)
+    r, pitch = truth(ts, p.roll, latency), truth(ts, p.pitch, latency)
     acc_up = np.gradient(np.gradient(p.height_m, DT_S), DT_S)
-    f_down = -(G + truth(ts, acc_up))
+    f_down = -(G + truth(ts, acc_up, latency))
     # f_body = R_ned_to_body @ (0, 0, f_down), yaw 0
     f_body = np.stack(
         [
@@ -498,15 +516,15 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     log("IMU", ts, 0, *f_body)
 
     ts = at(10.0)
-    roll_logged = np.rad2deg(truth(ts, p.roll))
+    roll_logged = np.rad2deg(truth(ts, p.roll, latency))
     if "attitude-error" in faults:
         lo, hi = _fault_window(duration, 0.55, 10.0)
         roll_logged = roll_logged + np.where((ts >= lo) & (ts < hi), 30.0, 0.0)
     wrapped = (roll_logged + 180.0) % 360.0 - 180.0  # as logged: in [-180, 180)
     roll_logged = np.where(np.abs(roll_logged) > 180.0, wrapped, roll_logged)
-    log("ATT", ts, roll_logged, np.rad2deg(truth(ts, p.pitch)), 0.0)
+    log("ATT", ts, roll_logged, np.rad2deg(truth(ts, p.pitch, latency)), 0.0)
     log("SIM", ts, HOME_AMSL_M + truth(ts, p.height_m))
-    return SimulatedFlight(scenario, seed, duration, tuple(faults), p, records)
+    return SimulatedFlight(scenario, seed, duration, tuple(faults), p, records, latency, gps_lag)
 
 
 _TYPES = {
