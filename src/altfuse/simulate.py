@@ -6,9 +6,10 @@ sensor behind the truth by a latency drawn per flight from ``LATENCY_S`` (as the
 simulators' sensors lag their own), the GPS by a further lag drawn from ``GPS_LAG_S``:
 
 - GPS, 5 Hz, altitude AMSL (home at ``HOME_AMSL_M``), lagging, white noise plus a slow random
-  walk; no fix (Status 1, altitude 12 m off) for its first 3 s. Its vertical velocity (``VZ``,
-  down) with the same lag (a receiver reports both for one epoch; ArduPilot's EKF3 applies one
-  ``EK3_GPS_DELAY`` to both) and ``GPS_VZ_SIGMA_M_S`` of white noise.
+  walk; no fix (Status 1, altitude 12 m off) for its first 3 s. Its ground speed (``Spd``) and
+  vertical velocity (``VZ``, down) with the same lag (a receiver reports them for one epoch;
+  ArduPilot's EKF3 applies one ``EK3_GPS_DELAY`` to all), the velocity with
+  ``GPS_VZ_SIGMA_M_S`` of white noise.
 - Barometer, 20 Hz, 0.08 m noise, drifting with its temperature (logged in ``BARO.Temp``): the
   board warms from 25 °C towards 35 °C with a 60 s time constant, 0.12 m per °C.
 - Rangefinder, 20 Hz, distance along the body's down axis to the ground, 0.25 m mount height;
@@ -32,13 +33,14 @@ angles), ``imu-clip`` (a shock: five consecutive IMU samples pinned at the 16 g 
 false velocity, too long for a median of its neighbours to call a spike), ``imu-25hz`` (the IMU
 logged at 25 Hz, as older and busier logs do); and two of the other sensors:
 ``baro-scale`` (the barometer 7 % high over the flight: a warm sensor) and ``rangefinder-low``
-(mounted 0.1 m up, below its 0.2 m minimum: OutOfRangeLow on the ground); and ``roll-flip`` (a
-full turn about the roll axis in 1 s, as aerobatic and tumbling logs show: the logged roll, in
-[-180, 180) degrees as ArduPilot logs it, wraps through +-180, and the rangefinder, pointing at
-the sky, reads out of range); and ``splice`` (nothing logged for 20 s from half the flight, the
-vehicle flying on: a log stopped and resumed, or cut and joined); and ``hard-landing`` (the
-motors cut 1 m above the ground on the last descent: a fall, an impact the accelerometer clips
-at its 16 g range, and a bounce; not on the hover, which does not land).
+(mounted 0.1 m up, below its 0.2 m minimum: OutOfRangeLow on the ground). And three of the
+flight and its log: ``roll-flip`` (a full turn about the roll axis in 1 s, as aerobatic and
+tumbling logs show: the logged roll, in [-180, 180) degrees as ArduPilot logs it, wraps through
++-180, and the rangefinder, pointing at the sky, reads out of range), ``splice`` (nothing
+logged for 20 s from half the flight, the vehicle flying on: a log stopped and resumed, or cut
+and joined) and ``hard-landing`` (the motors cut 1 m above the ground on the last descent: a
+fall, an impact the accelerometer clips at its 16 g range, and a bounce; not on the hover,
+which does not land).
 """
 
 from __future__ import annotations
@@ -451,7 +453,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         HOME_LAT,
         HOME_LNG,
         alt,
-        truth(ts, np.abs(np.gradient(p.distance_m, DT_S))),
+        truth(ts, np.abs(np.gradient(p.distance_m, DT_S)), lag_s=gps_lag),
         0.0,
         -(truth(ts, climb, lag_s=gps_lag) + climb_noise),
         0.0,

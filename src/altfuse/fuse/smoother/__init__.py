@@ -152,9 +152,9 @@ check reads 0.1-1.3 where the +-2 sigma coverage runs from 0.63 to 1.00; the vel
 
 Measured (``benchmarks/smoother_accuracy.py``, 192 simulated flights): the lowest RMSE of all
 methods on every one (the closest: the hover with seed 0 and its barometer 7 % high, 0.472 m
-against support's 0.505); 92.5 % of the true errors within +-2 ``fused_std`` over all, 0.11
+against support's 0.505); 92.6 % of the true errors within +-2 ``fused_std`` over all, 0.11
 to 1.00 per flight (the lowest on the hovers whose barometer reads 7 % high: the scale is not
-learnt there), 88 of the flights within 0.90-0.99. On the simulators' 13 truth logs
+learnt there), 91 of the flights within 0.90-0.99. On the simulators' 13 truth logs
 (``benchmarks/truth_accuracy.py``, README "Accuracy"): RMSE and maximum error within the
 project's bar on all 13; the coverage within 0.90-0.99 on 9 (0.87 and 0.899 where the sensors
 lag the truth by 10-12 ms, 0.995-0.999 on two whose climbs hardly lag: ``TIMING_SIGMA_S``).

@@ -210,9 +210,11 @@ def _forward(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ra
             transition(fl[0], dt, use_bias, drifts)
             process_noise(q, dt, q_accel[k], q_state[k], use_bias, drifts)
             predict(x, p, fl, q, u, work)
-        if reset[k] > 0:  # a splice: part of the state returns to the prior, the height
-            restart(x, p, (start[0], start[1]), returning[reset[k]])  # (every row's first)
-            x[0] = start[4][k]  # to the segment's own first guess
+        if reset[k] > 0:
+            # a splice: part of the state returns to the prior (h and v in every row), h at
+            # the segment's own first guess
+            restart(x, p, (start[0], start[1]), returning[reset[k]])
+            x[0] = start[4][k]
         i = who[k]
         slot = k if keep else 0
         if i != TICK:
