@@ -473,15 +473,18 @@ def test_an_offset_measured_on_the_ground_is_known_to_its_standard_error() -> No
 def test_a_log_that_starts_just_before_take_off_gets_its_datum_from_the_ground() -> None:
     """The 4.5 plane's log starts 3 s before take-off: no span to hold h = 0 in, and the 1 m
     offset priors alone made fused_std 0.58 m (coverage 1.00) where the datum, measured on the
-    ground window, is known to centimetres."""
-    ev = evaluate(shared_log("truth/plane_4.5.0dev_eozbademci_autotest_climb88m.BIN"), ["smoother"])
+    ground window, is known to centimetres. The model's own band, without the sensors' unknown
+    latency (which takes it to 0.995)."""
+    exact = FuseOptions(params={"smoother": SmootherParams(timing_sigma_s=0.0)})
+    log = shared_log("truth/plane_4.5.0dev_eozbademci_autotest_climb88m.BIN")
+    ev = evaluate(log, ["smoother"], exact)
     assert ev.prepared.referred.on_ground_s is None
     windows = ev.prepared.referred.datum_windows
     assert all(w is not None for w in windows)
     sigma = ev.runs["smoother"].result.tick_traces["fused_std"]
     assert 0.01 < np.nanmedian(sigma) < 0.05  # measured 0.027 m
     assert ev.runs["smoother"].result.params["offset_prior_gps_m"] < 0.05  # in the metadata
-    assert 0.90 <= verdict(ev, "smoother")["coverage"] <= 0.99  # measured 0.969
+    assert 0.90 <= verdict(ev, "smoother")["coverage"] <= 0.99  # measured 0.946
 
 
 def _ground_step(kinds: tuple[str, ...]) -> FusionInput:

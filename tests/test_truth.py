@@ -170,8 +170,8 @@ def test_a_short_climb_only_log_gets_its_barometer_scale() -> None:
 def test_a_climbs_band_counts_the_sensors_unknown_latency() -> None:
     """Issue 15, item 4: every sensor of the 305 m SITL climb lags its truth by about 7 ms,
     which nothing in the log shows; at 2.5 m/s that is 2 cm, where the model's own sigma is
-    under 1 cm. With the latency's sigma (4 ms) the climbs' +-2 sigma band covers their errors;
-    without it, a third of them."""
+    under 1 cm. With the latency's sigma (4 ms; 5 by default) the climbs' +-2 sigma band covers
+    their errors; without it, a third of them."""
     prepared = prepare_log(shared_log(CLIMB_305), FuseOptions())
     truth = choose_truth(prepared.log, prepared.referred).h
 

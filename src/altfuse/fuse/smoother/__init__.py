@@ -152,12 +152,12 @@ check reads 0.1-1.3 where the +-2 sigma coverage runs from 0.63 to 1.00; the vel
 
 Measured (``benchmarks/smoother_accuracy.py``, 192 simulated flights): the lowest RMSE of all
 methods on every one (the closest: the hover with seed 0 and its barometer 7 % high, 0.472 m
-against support's 0.505); 92.6 % of the true errors within +-2 ``fused_std`` over all, 0.11
+against support's 0.505); 93.9 % of the true errors within +-2 ``fused_std`` over all, 0.13
 to 1.00 per flight (the lowest on the hovers whose barometer reads 7 % high: the scale is not
-learnt there), 91 of the flights within 0.90-0.99. On the simulators' 13 truth logs
+learnt there), 79 of the flights within 0.90-0.99. On the simulators' 13 truth logs
 (``benchmarks/truth_accuracy.py``, README "Accuracy"): RMSE and maximum error within the
-project's bar on all 13; the coverage within 0.90-0.99 on 9 (0.87 and 0.899 where the sensors
-lag the truth by 10-12 ms, 0.995-0.999 on two whose climbs hardly lag: ``TIMING_SIGMA_S``).
+project's bar on all 13; the coverage 0.907-1.000, within 0.90-0.99 on 8 (0.995-1.000 on
+five, among them those whose sensors lag the truth least: ``TIMING_SIGMA_S``).
 Where GPS and barometer are alone through Paper A's
 excursion, part of it is followed and ``fused_std`` is too small.
 
@@ -246,10 +246,14 @@ NIS_CHECK = 2.0
 #: fused height lags by -7 to +12 ms (0.9 on the Solo's, 7-12 on nine copters): at 2.5 m/s,
 #: 1.7 cm, beyond the model's 2 sigma of 1.5 cm (the 305 m climb's climbs were covered 0.35). It
 #: adds ``(v sigma)^2`` to the height's variance (``v`` the smoothed vertical velocity); the
-#: estimate is unchanged. 4 ms by the worst log of the 13 truth logs (README "Accuracy"): with
-#: 0, coverage 0.68 at worst (9 of 13 within 0.90-0.99); 4 ms, 0.87 (9 of 13); 5 ms, 0.90-1.00
-#: (8 of 13, the five others at 0.995-1.000).
-TIMING_SIGMA_S = 0.004
+#: estimate is unchanged. 5 ms, the least that leaves no truth log's band overconfident, by
+#: the worst log of the 13 (README "Accuracy"): coverage 0.68-0.99 with 0 (9 of 13 within
+#: 0.90-0.99), 0.87-1.00 with 4 ms (9 of 13: 0.866 and 0.899 below, where the sensors lag
+#: 10-12 ms), 0.907-1.000 with 5 ms (8 of 13, the five others 0.995-1.000: at most 0.010 out
+#: of the window, against 0.034), 0.924-1.000 with 6 ms (5 of 13). On altfuse's 192 flights,
+#: whose sensors lag 5-12 ms, the band is within 0.90-0.99 on 79 with 5 ms, below on 27 (91
+#: and 38 with 4 ms), the least coverage the hovers' with their barometer 7 % high either way.
+TIMING_SIGMA_S = 0.005
 
 
 @dataclass(frozen=True, kw_only=True)
