@@ -247,10 +247,11 @@ NIS_CHECK = 2.0
 #: 1.7 cm, beyond the model's 2 sigma of 1.5 cm (the 305 m climb's climbs were covered 0.35). It
 #: adds ``(v sigma)^2`` to the height's variance (``v`` the smoothed vertical velocity); the
 #: estimate is unchanged. 5 ms, the least that leaves no truth log's band overconfident, by
-#: the worst log of the 13 (README "Accuracy"): coverage 0.68-0.99 with 0 (9 of 13 within
-#: 0.90-0.99), 0.87-1.00 with 4 ms (9 of 13: 0.866 and 0.899 below, where the sensors lag
-#: 10-12 ms), 0.907-1.000 with 5 ms (8 of 13, the five others 0.995-1.000: at most 0.010 out
-#: of the window, against 0.034), 0.924-1.000 with 6 ms (5 of 13). On altfuse's 192 flights,
+#: the worst log of the 13 (README "Accuracy"; ``benchmarks/timing_sigma.py``): coverage
+#: 0.68-0.99 with 0 (9 of 13 within 0.90-0.99), 0.87-1.00 with 4 ms (9 of 13: 0.866 and 0.899
+#: below, where the sensors lag 10-12 ms), 0.907-1.000 with 5 ms (8 of 13, the five others
+#: 0.995-1.000: at most 0.010 out of the window, against 0.034), 0.924-1.000 with 6 ms (5 of
+#: 13). On altfuse's 192 flights,
 #: whose sensors lag 5-12 ms, the band is within 0.90-0.99 on 79 with 5 ms, below on 27 (91
 #: and 38 with 4 ms), the least coverage the hovers' with their barometer 7 % high either way.
 TIMING_SIGMA_S = 0.005

@@ -1,0 +1,95 @@
+"""The smoother's +-2 sigma coverage against the truth for a range of ``timing_sigma_s`` (the
+sensors' unknown common latency, ``TIMING_SIGMA_S``): the measurement behind its default.
+
+Run on demand:  python benchmarks/timing_sigma.py [--shared ../shared/logs] [--seeds 0 1 2]
+[--jobs 2]
+
+The latency's term changes ``fused_std`` alone (the estimate does not move), so each log is
+fused once with the default and its band recomputed for every value: ``var_h`` is the default
+band's variance less its own latency term, ``v`` the smoothed vertical velocity. Logs: the 13
+in ``../shared/logs/truth`` (ArduPilot SITL, truth ``SIM.Alt``) and the simulated flights of
+``tests/accuracy.py`` (every scenario and fault, ``--seeds``). Per value, for each group: the
+coverage's range, how many logs lie within 0.90-0.99, above and below, and the worst distance
+out of that window; then each truth log's coverage per value.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from altfuse.evaluation import choose_truth
+from altfuse.fuse.smoother import TIMING_SIGMA_S
+from altfuse.io import read_log
+from altfuse.pipeline import FuseOptions, prepare, run_method
+from altfuse.simulate import simulate_flight, write_simulated_log
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from accuracy import Flight, coverage, flights, label  # noqa: E402
+
+GRID_S = (0.0, 0.002, 0.003, 0.004, 0.005, 0.006, 0.008, 0.010)
+WINDOW = (0.90, 0.99)
+
+
+def coverages(path: Path) -> list[float]:
+    """The default run's coverage of the truth, recomputed for every value of GRID_S."""
+    prepared = prepare(read_log(path), FuseOptions())
+    truth = choose_truth(prepared.log, prepared.referred, "sim").h
+    result = run_method(prepared, FuseOptions()).result
+    error = result.fused - truth
+    sigma, v = result.tick_traces["fused_std"], result.tick_traces["velocity"]
+    var_h = sigma**2 - (v * TIMING_SIGMA_S) ** 2
+    return [coverage(error, np.sqrt(var_h + (v * s) ** 2)) for s in GRID_S]
+
+
+def truth_log(path: Path) -> tuple[str, list[float]]:
+    return path.stem, coverages(path)
+
+
+def simulated(flight: Flight) -> tuple[str, list[float]]:
+    scenario, seed, faults = flight
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "flight.bin"
+        write_simulated_log(simulate_flight(scenario, seed, faults=faults), path)
+        return label(flight), coverages(path)
+
+
+def summary(name: str, rows: list[tuple[str, list[float]]]) -> None:
+    c = np.array([r[1] for r in rows])
+    lo, hi = WINDOW
+    print(f"{name}: {len(rows)} logs")
+    for j, s in enumerate(GRID_S):
+        col = c[:, j]
+        out = np.maximum(lo - col, col - hi).clip(0.0)
+        print(
+            f"  {s * 1000:4.0f} ms: coverage {col.min():.3f}-{col.max():.3f}, within "
+            f"{int(np.sum((col >= lo) & (col <= hi)))}, above {int(np.sum(col > hi))}, below "
+            f"{int(np.sum(col < lo))}, worst {out.max():.3f} out of the window"
+        )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--shared", type=Path, default=ROOT.parent / "shared" / "logs")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--jobs", type=int, default=2)
+    args = parser.parse_args()
+    with ProcessPoolExecutor(args.jobs) as pool:
+        truth = list(pool.map(truth_log, sorted((args.shared / "truth").glob("*.BIN"))))
+        sims = list(pool.map(simulated, flights(args.seeds)))
+    summary("truth logs", truth)
+    summary("simulated flights", sims)
+    print("per truth log, coverage at " + ", ".join(f"{s * 1000:g}" for s in GRID_S) + " ms:")
+    for name, row in truth:
+        print(f"  {name:56s} " + " ".join(f"{x:.3f}" for x in row))
+
+
+if __name__ == "__main__":
+    main()
