@@ -5,8 +5,8 @@ Run on demand:  python benchmarks/timing_sigma.py [--shared ../shared/logs] [--s
 [--jobs 2]
 
 The latency's term changes ``fused_std`` alone (the estimate does not move), so each log is
-fused once with the default and its band recomputed for every value: ``var_h`` is the default
-band's variance less its own latency term, ``v`` the smoothed vertical velocity. Logs: the 13
+fused once without it and the term added for every value, at the smoothed vertical velocity.
+Logs: the 13
 in ``../shared/logs/truth`` (ArduPilot SITL, truth ``SIM.Alt``) and the simulated flights of
 ``tests/accuracy.py`` (every scenario and fault, ``--seeds``). Per value, for each group: the
 coverage's range, how many logs lie within 0.90-0.99, above and below, and the worst distance
@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from altfuse.evaluation import choose_truth
-from altfuse.fuse.smoother import TIMING_SIGMA_S
+from altfuse.fuse.smoother import SmootherParams, fused_std
 from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, prepare, run_method
 from altfuse.simulate import simulate_flight, write_simulated_log
@@ -39,14 +39,14 @@ WINDOW = (0.90, 0.99)
 
 
 def coverages(path: Path) -> list[float]:
-    """The default run's coverage of the truth, recomputed for every value of GRID_S."""
+    """The coverage of the truth by the band of one run without the latency's term, that term
+    added for every value of GRID_S (:func:`altfuse.fuse.smoother.fused_std`)."""
     prepared = prepare(read_log(path), FuseOptions())
     truth = choose_truth(prepared.log, prepared.referred, "sim").h
-    result = run_method(prepared, FuseOptions()).result
-    error = result.fused - truth
-    sigma, v = result.tick_traces["fused_std"], result.tick_traces["velocity"]
-    var_h = sigma**2 - (v * TIMING_SIGMA_S) ** 2
-    return [coverage(error, np.sqrt(var_h + (v * s) ** 2)) for s in GRID_S]
+    exact = FuseOptions(params={"smoother": SmootherParams(timing_sigma_s=0.0)})
+    result = run_method(prepared, exact).result
+    var_h, v = result.tick_traces["fused_std"] ** 2, result.tick_traces["velocity"]
+    return [coverage(result.fused - truth, fused_std(var_h, v, s)) for s in GRID_S]
 
 
 def truth_log(path: Path) -> tuple[str, list[float]]:

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from pymavlink import mavutil
 
 from altfuse.cli import cli
-from altfuse.inertial import vertical_acceleration
+from altfuse.inertial import G, vertical_acceleration
 from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, prepare
 from altfuse.simulate import (
@@ -258,7 +258,7 @@ def test_a_hard_landing_falls_the_last_metre_bounces_and_clips_the_accelerometer
     impact = float(h[touch - 1] - h[touch]) / float(t[touch] - t[touch - 1])
     assert 4.0 < impact < 5.0  # sqrt(v0^2 + 2 g 1 m)
     bounce = h[touch:].max()
-    assert bounce == pytest.approx((RESTITUTION * impact) ** 2 / (2 * 9.80665), rel=0.15)
+    assert bounce == pytest.approx((RESTITUTION * impact) ** 2 / (2 * G), rel=0.15)
     np.testing.assert_array_equal(h[:first], clean.profile.height_m[:first])
     assert h[-1] == 0.0
     # the log: one IMU sample pinned at the range on the impact, free fall just before it

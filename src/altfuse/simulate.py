@@ -423,10 +423,14 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     latency = timing.uniform(*LATENCY_S)
     gps_lag = latency + timing.uniform(*GPS_LAG_S)
 
+    def sensed(ts: FloatArray, values: FloatArray, lag_s: float = latency) -> FloatArray:
+        """What a sensor stamps ``ts`` saw: the truth ``lag_s`` earlier."""
+        return truth(ts, values, lag_s)
+
     # GPS: 5 Hz, lagging, AMSL, white noise + random walk, no fix for the first 3 s
     ts = keep("gps", at(5.0))
     fix = ts >= 3.0
-    alt = HOME_AMSL_M + truth(ts, p.height_m, lag_s=gps_lag)
+    alt = HOME_AMSL_M + sensed(ts, p.height_m, gps_lag)
     alt = (
         alt
         + np.cumsum(rng.normal(0.0, 0.05, ts.size))
@@ -453,9 +457,9 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         HOME_LAT,
         HOME_LNG,
         alt,
-        truth(ts, np.abs(np.gradient(p.distance_m, DT_S)), lag_s=gps_lag),
+        sensed(ts, np.abs(np.gradient(p.distance_m, DT_S)), gps_lag),
         0.0,
-        -(truth(ts, climb, lag_s=gps_lag) + climb_noise),
+        -(sensed(ts, climb, gps_lag) + climb_noise),
         0.0,
         1,
     )
@@ -464,7 +468,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     ts = keep("baro", at(20.0))
     temp = 25.0 + 10.0 * (1 - np.exp(-ts / 60.0))
     scale = BARO_SCALE if "baro-scale" in faults else 1.0
-    alt = scale * truth(ts, p.height_m, latency) + 0.12 * (temp - 25.0) + truth(ts, p.baro_error_m)
+    alt = scale * sensed(ts, p.height_m) + 0.12 * (temp - 25.0) + truth(ts, p.baro_error_m)
     alt = alt + truth(ts, p.baro_sigma_m) * rng.normal(0.0, 1.0, ts.size)
     if "baro-drift" in faults:
         alt = alt + 0.05 * np.clip(ts - 0.4 * duration, 0.0, None)
@@ -472,12 +476,12 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
 
     # rangefinder: 20 Hz along the body axis, out-of-range codes as drivers log them
     ts = keep("rangefinder", at(20.0))
-    ground = p.terrain(truth(ts, p.distance_m, latency))
-    tilt = np.cos(truth(ts, p.roll, latency)) * np.cos(truth(ts, p.pitch, latency))
+    ground = p.terrain(sensed(ts, p.distance_m))
+    tilt = np.cos(sensed(ts, p.roll)) * np.cos(sensed(ts, p.pitch))
     mount = RANGEFINDER_LOW_MOUNT_M if "rangefinder-low" in faults else RANGEFINDER_MOUNT_M
     # pointing above the horizon it sees no ground: beyond its maximum
     dist = np.full(ts.size, np.inf)
-    np.divide(truth(ts, p.height_m, latency) - ground + mount, tilt, out=dist, where=tilt > 0)
+    np.divide(sensed(ts, p.height_m) - ground + mount, tilt, out=dist, where=tilt > 0)
     dist = dist + truth(ts, p.rangefinder_sigma_m) * rng.normal(0.0, 1.0, ts.size)
     stat = np.where(dist > p.rangefinder_max_m, 3, np.where(dist < RANGEFINDER_MIN_M, 2, 4))
     dist = np.clip(dist, RANGEFINDER_MIN_M, p.rangefinder_max_m)
@@ -497,9 +501,9 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
 
     # IMU: 50 Hz (or 25) specific force in FRD, with bias and noise
     ts = at(25.0 if "imu-25hz" in faults else 50.0)
-    r, pitch = truth(ts, p.roll, latency), truth(ts, p.pitch, latency)
+    r, pitch = sensed(ts, p.roll), sensed(ts, p.pitch)
     acc_up = np.gradient(np.gradient(p.height_m, DT_S), DT_S)
-    f_down = -(G + truth(ts, acc_up, latency))
+    f_down = -(G + sensed(ts, acc_up))
     # f_body = R_ned_to_body @ (0, 0, f_down), yaw 0
     f_body = np.stack(
         [
@@ -518,13 +522,13 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     log("IMU", ts, 0, *f_body)
 
     ts = at(10.0)
-    roll_logged = np.rad2deg(truth(ts, p.roll, latency))
+    roll_logged = np.rad2deg(sensed(ts, p.roll))
     if "attitude-error" in faults:
         lo, hi = _fault_window(duration, 0.55, 10.0)
         roll_logged = roll_logged + np.where((ts >= lo) & (ts < hi), 30.0, 0.0)
     wrapped = (roll_logged + 180.0) % 360.0 - 180.0  # as logged: in [-180, 180)
     roll_logged = np.where(np.abs(roll_logged) > 180.0, wrapped, roll_logged)
-    log("ATT", ts, roll_logged, np.rad2deg(truth(ts, p.pitch, latency)), 0.0)
+    log("ATT", ts, roll_logged, np.rad2deg(sensed(ts, p.pitch)), 0.0)
     log("SIM", ts, HOME_AMSL_M + truth(ts, p.height_m))
     return SimulatedFlight(scenario, seed, duration, tuple(faults), p, records, latency, gps_lag)
 

@@ -372,9 +372,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         # the states where a sensor is (in a pause of every sensor they are the model's guess)
         traces={"offset": np.where(valid[:, None], xs[:, 3 : 3 + m], np.nan)},
         tick_traces={
-            "fused_std": np.where(
-                valid, _fused_std(var_h, xs[:, 1], params.timing_sigma_s), np.nan
-            ),
+            "fused_std": np.where(valid, fused_std(var_h, xs[:, 1], params.timing_sigma_s), np.nan),
             "velocity": np.where(valid, xs[:, 1], np.nan),
             "accel_bias": np.where(valid, xs[:, 2], np.nan),
         },
@@ -407,7 +405,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     )
 
 
-def _fused_std(var_h: FloatArray, v: FloatArray, timing_sigma_s: float) -> FloatArray:
+def fused_std(var_h: FloatArray, v: FloatArray, timing_sigma_s: float) -> FloatArray:
     """The height's standard deviation: the model's, and the sensors' unknown common latency
     (``timing_sigma_s``) at the smoothed vertical velocity ``v``: a height read ``tau`` late is
     ``v tau`` off."""
