@@ -31,8 +31,10 @@ from altfuse.batch import run_batch  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT / "tests"))
 
-from read_bench import DEFAULT_SOURCE, build  # noqa: E402
+from read_bench import DEFAULT_SOURCE  # noqa: E402
+from repeated import repeated_log  # noqa: E402
 
 REAL = (
     "beastayyg_log_0036_mechanical_failure.bin",
@@ -69,7 +71,7 @@ def main() -> None:
         big = Path(tmp) / "big"
         big.mkdir()
         for i in range(args.big):
-            build(DEFAULT_SOURCE, big / f"{i:02d}_big.bin", args.big_mb)
+            repeated_log(DEFAULT_SOURCE, big / f"{i:02d}_big.bin", args.big_mb)
         describe(big, f"{args.big} big logs built from {DEFAULT_SOURCE.name}")
         race(big, Path(tmp), args.repeat)
 

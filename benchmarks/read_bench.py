@@ -36,47 +36,19 @@ from pathlib import Path
 
 import numpy as np
 
-from altfuse.io.fastdf import HEADER, index_file
+from altfuse.io.fastdf import index_file
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from repeated import repeated_log  # noqa: E402
+
 DEFAULT_SOURCE = (
     ROOT.parent / "shared" / "logs" / "ardupilot" / ("beastayyg_log_0036_mechanical_failure.bin")
 )
 SMALL = ROOT / "sample_logs" / "mission.bin"  # loads the compiled loops before a measurement
-ONCE = {"FMT", "FMTU", "UNIT", "MULT", "PARM"}
 TYPES = ["GPS", "GPS2", "BARO", "BAR2", "RFND", "SONR", "CTUN", "IMU", "ATT", "XKF1", "NKF1",
          "ORGN", "AHR2", "POS", "SIM", "MSG", "VER", "FMTU"]  # fmt: skip
-
-
-def build(source: Path, target: Path, megabytes: float) -> int:
-    """Write a log of at least ``megabytes`` MB from ``source``; return its size in bytes."""
-    index = index_file(source)
-    data = index.data
-    once, block, shift_at = [], [], []
-    position = 0
-    for offset, type_id in zip(index.offsets.tolist(), index.types.tolist(), strict=True):
-        fmt = index.formats[type_id]
-        record = data[offset : offset + fmt.length]
-        if fmt.name in ONCE:
-            once.append(record)
-            continue
-        if fmt.columns[:1] == ("TimeUS",) and fmt.format[:1] == "Q":
-            shift_at.append(position + HEADER)
-        block.append(record)
-        position += fmt.length
-    head = np.concatenate(once)
-    body = np.concatenate(block)
-    where = np.array(shift_at, dtype=np.int64)
-    stamps = body[where[:, None] + np.arange(8)].copy().view("<u8").ravel()
-    span = int(stamps.max() - stamps.min()) + 1_000_000
-    copies = int(np.ceil(megabytes * 1e6 / body.size))
-    with target.open("wb") as out:
-        out.write(head.tobytes())
-        for k in range(copies):
-            shifted = (stamps + np.uint64(k * span)).view(np.uint8).reshape(-1, 8)
-            body[where[:, None] + np.arange(8)] = shifted
-            out.write(body.tobytes())
-    return target.stat().st_size
 
 
 ULOG_SOURCE = ROOT.parent / "shared" / "logs" / "px4" / "px4ulogrs_quadrotor_local.ulg"
@@ -257,7 +229,7 @@ def main() -> None:
             size = path.stat().st_size
             print(f"using {path}: {size / 1e6:.1f} MB")
         else:
-            size = build(args.source, path, args.mb)
+            size = repeated_log(args.source, path, args.mb)
             print(
                 f"built {path.name}: {size / 1e6:.1f} MB in {time.perf_counter() - started:.1f} s"
             )
@@ -299,7 +271,7 @@ def adversarial(source: Path, megabytes: float, repeat: int) -> None:
     """The index's time on the hostile files beside a clean file of the same size."""
     with tempfile.TemporaryDirectory() as tmp:
         clean = Path(tmp) / "clean.bin"
-        size = build(source, clean, megabytes)
+        size = repeated_log(source, clean, megabytes)
         base = median_of(repeat, "index", clean)
         whole = median_of(repeat, "read_log", clean)
         print(
