@@ -40,6 +40,7 @@ from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions, fuse_log
 from altfuse.simulate import simulate_flight, write_simulated_log
 from conftest import ROOT, shared_log
+from repeated import repeated_log
 
 FAULTS = ROOT / "sample_logs" / "mission_faults.bin"
 
@@ -576,6 +577,22 @@ def test_a_splice_starts_the_motion_and_the_offsets_afresh() -> None:
     assert pause.sum() > 1000
     assert np.isnan(run.result.tick_traces["velocity"][pause]).all()
     assert np.isnan(run.result.traces["offset"][pause]).all()
+
+
+def test_a_long_flight_keeps_its_height_with_its_agreeing_sensors(tmp_path: Path) -> None:
+    """45 minutes of flight: a real 150 s flight (a crash at its end) repeated 18 times. GPS
+    and barometer agree within a metre throughout, but for the crashes. With both offsets
+    random walks nothing held the height's common mode: the fused height wandered 4.2 m from
+    both sensors, its fused_std growing to 2.6 m. A GPS's error is bounded
+    (GPS_CORRELATION_S): 0.85 m at most, fused_std below 0.6 m."""
+    log = tmp_path / "long.bin"
+    repeated_log(shared_log("ardupilot/beastayyg_log_0036_mechanical_failure.bin"), log, 30)
+    run = fuse_log(log, FuseOptions())
+    assert run.referred.t[-1] - run.referred.t[0] > 2700.0
+    guard = run.provenance["guard"]
+    assert guard["diverged_ticks"] == 0
+    assert guard["max_excursion_m"] < 1.5
+    assert np.nanmax(run.result.tick_traces["fused_std"]) < 1.0
 
 
 def test_a_sensor_left_alone_is_let_loose_though_the_estimate_never_followed_it() -> None:

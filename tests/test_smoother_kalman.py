@@ -1,7 +1,8 @@
 """The smoother's Kalman and Rauch-Tung-Striebel passes against filterpy's (issue 15, item 8).
 
 A linear-Gaussian toy with the smoother's own state layout (height, velocity, accelerometer
-bias, two sensor offsets, a barometer's scale error and drift rate), irregular event times, one
+bias, two sensor offsets, the GPS's bounded, a barometer's scale error and drift rate),
+irregular event times, one
 scalar measurement of either sensor per event or none (a clock tick), the first events on the
 ground (h = 0 and v = 0 held there) and the last landed elsewhere (v = 0 alone), no gate:
 :func:`passes.run` must give filterpy's ``KalmanFilter.batch_filter`` and ``rts_smoother`` to
@@ -19,6 +20,7 @@ import pytest
 from filterpy.kalman import KalmanFilter, rts_smoother
 
 from altfuse.fuse.smoother.model import (
+    GPS_CORRELATION_S,
     RESET_DATUM,
     RESET_NONE,
     STILL_SIGMA,
@@ -35,7 +37,7 @@ from altfuse.fuse.smoother.model import (
 )
 from altfuse.fuse.smoother.passes import likelihood, likelihoods, run
 
-M = 2  # sensors: a GPS and a barometer, the barometer with a drift rate
+M = 2  # sensors: a GPS (its offset bounded) and a barometer, the barometer with a drift rate
 
 
 def toy(seed: int, accel: bool, spliced: bool = False) -> tuple[Events, Layout, np.ndarray]:
@@ -63,7 +65,7 @@ def toy(seed: int, accel: bool, spliced: bool = False) -> tuple[Events, Layout, 
         reset,
     )  # fmt: skip
     scale = Regressor("scale", 1, np.where(who == 1, truth, 0.0), 0.02)
-    layout = Layout(np.ones(M), (scale,), drifting=(1,))
+    layout = Layout(np.ones(M), (scale,), drifting=(1,), bounded=(0,))
     return events, layout, r
 
 
@@ -72,14 +74,14 @@ def filterpy_passes(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """filterpy's filtered and smoothed means and covariances over the same events (an event on
     the ground: its step, then the two holds as steps of their own with no time between)."""
-    n, drifts = layout.n, layout.drift_pairs
+    n, structure = layout.n, layout.structure(ev.use_bias)
     dts = np.diff(ev.t, prepend=ev.t[0])
     x0, p0 = prior(ev, layout)
     steps = []  # per filterpy step: (event, F, Q, u, H row, z, R)
     for k, dt in enumerate(dts):
         f, q = np.eye(n), np.zeros((n, n))
-        transition(f, dt, ev.use_bias, drifts)
-        process_noise(q, dt, ev.q_accel[k], ev.q_state[k], True, drifts)
+        transition(f, dt, structure)
+        process_noise(q, dt, ev.q_accel[k], ev.q_state[k], structure)
         u = np.array([[0.5 * ev.a[k] * dt * dt], [ev.a[k] * dt]])
         if ev.reset is not None and ev.reset[k]:
             # the prediction alone, then the splice: F = 0 and Q the prior's on the states
@@ -165,19 +167,30 @@ def test_smoother_is_filterpys_rts_smoother(seed: int, spliced: bool) -> None:
 
 
 @pytest.mark.parametrize("use_bias", [True, False])
-@pytest.mark.parametrize("drifting", [(), (1,), (0, 1)])
-def test_the_kernels_know_every_entry_of_f_off_its_diagonal(
-    use_bias: bool, drifting: tuple[int, ...]
+@pytest.mark.parametrize(("drifting", "bounded"), [((), ()), ((1,), (0,)), ((0, 1), ())])
+def test_the_kernels_know_every_entry_of_f_but_the_identitys(
+    use_bias: bool, drifting: tuple[int, ...], bounded: tuple[int, ...]
 ) -> None:
-    # the kernels multiply by F as the identity plus the entries couplings lists: one missing
-    # would be dropped silently
-    layout = Layout(np.ones(M), (), drifting=drifting)
-    drifts = layout.drift_pairs
+    # the kernels multiply by F as the identity plus the entries couplings lists, times the
+    # decays of the bounded states on the diagonal: one missing would be dropped silently
+    layout = Layout(np.ones(M), (), drifting=drifting, bounded=bounded)
+    structure = layout.structure(use_bias)
+    _, drifts, states = structure
     f = np.eye(layout.n)
-    transition(f, 0.37, use_bias, drifts)
-    off = {(int(i), int(k)) for i, k in zip(*np.nonzero(f - np.eye(layout.n)), strict=True)}
+    transition(f, 0.37, structure)
+    changed = np.nonzero(f - np.eye(layout.n))
+    off = {(int(i), int(k)) for i, k in zip(*changed, strict=True) if i != k}
     assert off == {(int(i), int(k)) for i, k in couplings(use_bias, drifts)}
     assert len(off) == 1 + 2 * use_bias + len(drifting)
+    assert {int(i) for i, k in zip(*changed, strict=True) if i == k} == set(states.tolist())
+    # a decaying state has no entry off the diagonal (the kernels take F = D (I + E))
+    assert not {int(c) for c in states} & {c for pair in off for c in pair}
+    # Q of a bounded offset: its random-walk density at short spans, q tau / 2 at long ones
+    q = np.zeros((layout.n, layout.n))
+    for dt, expected in [(1e-3, 0.01 * 1e-3), (1e6, 0.01 * GPS_CORRELATION_S / 2)]:
+        process_noise(q, dt, 0.0, np.full(M, 0.01), structure)
+        for c in states:
+            assert q[c, c] == pytest.approx(expected, rel=1e-3)
 
 
 def test_passes_run_at_once_give_the_passes_run_one_by_one() -> None:

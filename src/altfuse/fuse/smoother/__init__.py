@@ -23,6 +23,7 @@ steps at the measurements' rate, not the IMU's)::
 
     h += v dt + (a - b) dt^2 / 2        v += (a - b) dt
     b, c_i: random walks                noise: white acceleration q_a, and q_b, q_c per state
+    but a GPS's offset, bounded:        c_i += -c_i dt / tau  (first-order Gauss-Markov)
 
 Measurements, each fused at its own sample time (no resampling before fusion)::
 
@@ -110,7 +111,9 @@ From the log itself:
   not need lets the height wander where GPS and barometer are alone).
 
 The offsets' random-walk densities are physical defaults (``Q_OFFSET``: a GPS's vertical error
-wanders by about 1 m over 100 s; a barometer, once its temperature is modelled, by centimetres),
+wanders by about 1 m over 100 s, and no further than its bound, ``GPS_CORRELATION_S``: over hours
+nothing else holds the height's common mode; a barometer, once its temperature is modelled, by
+centimetres),
 not estimates: with two drifting sensors the log fixes only the sum of their densities, and
 splitting it evenly (the method of moments, and EM, which did not move from there) gave the
 barometer the GPS's wander (hover RMSE 0.35 m against 0.07 m with the defaults). What the log
@@ -151,10 +154,10 @@ check reads 0.1-1.3 where the +-2 sigma coverage runs from 0.63 to 1.00; the vel
 0.01-0.3, its floor above its noise there).
 
 Measured (``benchmarks/smoother_accuracy.py``, 192 simulated flights): the lowest RMSE of all
-methods on every one (the closest: the hover with seed 0 and its barometer 7 % high, 0.472 m
-against support's 0.505); 93.9 % of the true errors within +-2 ``fused_std`` over all, 0.13
+methods on every one (the closest: the hover with seed 0 and its barometer 7 % high, 0.473 m
+against support's 0.505); 93.8 % of the true errors within +-2 ``fused_std`` over all, 0.12
 to 1.00 per flight (the lowest on the hovers whose barometer reads 7 % high: the scale is not
-learnt there), 79 of the flights within 0.90-0.99. On the simulators' 13 truth logs
+learnt there), 75 of the flights within 0.90-0.99. On the simulators' 13 truth logs
 (``benchmarks/truth_accuracy.py``, README "Accuracy"): RMSE and maximum error within the
 project's bar on all 13; the coverage 0.907-1.000, within 0.90-0.99 on 8 (0.995-1.000 on
 five, among them those whose sensors lag the truth least: ``TIMING_SIGMA_S``).
@@ -286,7 +289,8 @@ class SmootherParams(Params):
     )
     offset_noise_m2_s: Mapping[str, float] = param(
         {},
-        help="random-walk density of a sensor's offset (a rangefinder's ground height)",
+        help="random-walk density of a sensor's offset (a rangefinder's ground height; a "
+        "GPS's at spans short against its bound)",
         unit="m^2/s",
         check="positive",
         default_text=f"gps {Q_OFFSET['gps']:g} ({Q_OFFSET_STABLE_GPS['gps']:g} where the log shows "
@@ -430,6 +434,7 @@ def _layout(
         np.array([-1.0 if k == "rangefinder" else 1.0 for k in inputs.kinds]),
         tuple(regressors),
         offset_prior=None if standing else datum_priors(samples, inputs.datum_windows),
+        bounded=tuple(i for i, k in enumerate(inputs.kinds) if k == "gps"),
     )
 
 

@@ -36,9 +36,11 @@ from altfuse.model import FloatArray
 
 #: Work arrays for ``n`` states (:func:`scratch`): three (n, n), two (n,).
 Scratch = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
-#: ``F`` as the kernels take it: the dense matrix, and its entries off the diagonal (rows of
-#: (i, k)), where alone it differs from the identity.
-Transition = tuple[FloatArray, np.ndarray]
+#: ``F`` as the kernels take it: the dense matrix, its entries off the diagonal (rows of
+#: (i, k)) and the states whose own entry on the diagonal is not 1 (a decay: a bounded offset,
+#: in no row or column of those entries off the diagonal), where alone it differs from the
+#: identity: ``F = D (I + E)``, ``D`` diagonal, ``E`` the entries off it.
+Transition = tuple[FloatArray, np.ndarray, np.ndarray]
 
 
 @compiled
@@ -52,9 +54,11 @@ def predict(
     x: FloatArray, p: FloatArray, fl: Transition, q: FloatArray, u: FloatArray, work: Scratch
 ) -> None:
     """The prior at the next step, in place: the state and its covariance carried through F."""
-    f, links = fl
+    f, links, decaying = fl
     xw = work[3]
-    # x = F x + B u = x + E x + B u  (F = I + E)
+    # x = F x + B u = D x + E x + B u  (F = D (I + E) = D + E: no decaying state has an E entry)
+    for c in decaying:
+        x[c] *= f[c, c]
     for i in range(x.size):
         xw[i] = x[i] + u[i]
     for e in range(links.shape[0]):
@@ -67,10 +71,12 @@ def predict(
 @compiled
 def predict_covariance(p: FloatArray, fl: Transition, q: FloatArray, work: Scratch) -> None:
     """The prior's covariance, in place (:func:`predict` without the state)."""
-    f, links = fl
+    f, links, decaying = fl
     fp = work[0]
     n = p.shape[0]
-    # P = F P F' + Q:  F P = P + E P, then (F P) F' = F P + (F P) E'
+    # P = F P F' + Q = (I + E) (D P D) (I + E)' + Q:  D P D first
+    scale_diagonal(p, f, decaying)
+    # then F P = P + E P, and (F P) F' = F P + (F P) E'
     fp[:] = p
     for e in range(links.shape[0]):
         i, k = links[e, 0], links[e, 1]
@@ -222,14 +228,16 @@ def adjoint_predict(adjoint: tuple[FloatArray, FloatArray], fl: Transition, work
     """The smoother's adjoint carried back through a transition, in place: from the prior at
     step k to the posterior at k - 1 (``F`` between them)."""
     lam, big = adjoint
-    f, links = fl
+    f, links, decaying = fl
     old, bf = work[3], work[0]
     n = lam.size
-    # lambda = F' lambda = lambda + E' lambda
+    # lambda = F' lambda = D (lambda + E' lambda)
     old[:] = lam
     for e in range(links.shape[0]):
         i, k = links[e, 0], links[e, 1]
         lam[k] += f[i, k] * old[i]
+    for c in decaying:
+        lam[c] *= f[c, c]
     # Lambda = F' (Lambda F):  Lambda F = Lambda + Lambda E, then F' (Lambda F) adds E' (Lambda F)
     bf[:] = big
     for e in range(links.shape[0]):
@@ -241,6 +249,19 @@ def adjoint_predict(adjoint: tuple[FloatArray, FloatArray], fl: Transition, work
         i, k = links[e, 0], links[e, 1]
         for c in range(n):
             big[k, c] += f[i, k] * bf[i, c]
+    # then D (F' Lambda F) D
+    scale_diagonal(big, f, decaying)
+
+
+@compiled
+def scale_diagonal(m: FloatArray, f: FloatArray, decaying: np.ndarray) -> None:
+    """``D m D`` in place, for a symmetric ``m``: ``D`` the identity but for ``F``'s own entries
+    ``f[c, c]`` of the ``decaying`` states."""
+    for c in decaying:
+        d = f[c, c]
+        for j in range(m.shape[0]):
+            m[c, j] *= d
+            m[j, c] *= d
 
 
 @compiled

@@ -52,6 +52,20 @@ LANDED_MARGIN_S = 2.0
 #: log resumed in flight, its sensors' offsets the main segment's), and where the vehicle is
 #: with every sensor's offset and drift (a segment referred to its own ground).
 RESET_NONE, RESET_MOTION, RESET_DATUM = 0, 1, 2
+#: A GPS's vertical error is bounded: its offset is a first-order Gauss-Markov process of this
+#: correlation time [s] (``dc = -c dt / tau + dw``: stationary receivers' errors fit an
+#: Ornstein-Uhlenbeck process, not a random walk, Schumayer et al., Sensors 20(21) 6050,
+#: 2020, doi:10.3390/s20216050), of its random-walk density ``q`` at spans short against
+#: ``tau``, its standard deviation never above ``sqrt(q tau / 2)`` (1.7 m for the default
+#: 0.01 m^2/s, 0.17 m for a stable GPS's 1e-4). The barometer's offset stays a random walk (the
+#: weather moves it for hours). With both random walks nothing held the height's common mode:
+#: a real 150 s flight repeated for 45 minutes had its fused height 4.2 m from GPS and
+#: barometer, which agreed within a metre, fused_std 2.6 m; over 7.4 hours 42.8 m, 160,983 of
+#: 265,476 ticks diverged. Measured at 300 / 600 / 1200 / 3600 s: that flight's largest gap
+#: from a sensor 0.95 / 0.85 / 1.94 / 3.16 m; on the 192 simulated flights, whose GPS is a
+#: random walk, the worst RMSE against the random-walk model's 1.30 / 1.13 / 1.06 / 1.04 (the
+#: smoother still the lowest of all methods on every one); the truth logs within 1 mm.
+GPS_CORRELATION_S = 600.0
 #: Prior on a sensor's offset from the datum [m], where the flight says nothing better; and the
 #: fewest samples on the ground that say better.
 OFFSET_PRIOR = 1.0
@@ -223,6 +237,7 @@ class Layout:
     regressors: tuple[Regressor, ...]
     drifting: tuple[int, ...] = ()  # the sensors whose offset has a drift rate
     offset_prior: FloatArray | None = None  # each offset's prior sigma [m]; None: OFFSET_PRIOR
+    bounded: tuple[int, ...] = ()  # the sensors whose offset is bounded (GPS_CORRELATION_S)
 
     @property
     def n(self) -> int:
@@ -246,6 +261,11 @@ class Layout:
         pairs = [(3 + i, first + d) for d, i in enumerate(self.drifting)]
         return np.array(pairs, dtype=int).reshape(-1, 2)
 
+    def structure(self, use_bias: bool) -> Structure:
+        """F's structure (:data:`Structure`), as the kernels take it."""
+        bounded = np.array([3 + i for i in self.bounded], dtype=np.int64)
+        return use_bias, self.drift_pairs.astype(np.int64), bounded
+
     def adding(self, regressors: Sequence[Regressor]) -> Layout:
         """The same with these regressors too."""
         return replace(self, regressors=self.regressors + tuple(regressors))
@@ -268,16 +288,25 @@ def couplings(use_bias: bool, drifts: np.ndarray) -> np.ndarray:
     return np.array(pairs, dtype=np.int64).reshape(-1, 2)
 
 
+#: F's structure, as the kernels take it: whether the accelerometer's bias is a state, the
+#: drifting offsets' (offset, rate) state pairs, the bounded offsets' states.
+Structure = tuple[bool, np.ndarray, np.ndarray]
+
+
 @compiled
-def transition(f: FloatArray, dt: float, use_bias: bool, drifts: np.ndarray) -> None:
-    """F over ``dt``, into ``f`` (an identity but for the entries :func:`couplings` lists):
-    h += v dt - b dt^2/2, v += -b dt, c_i += r_i dt for a sensor with a drift rate ``r_i``
-    (``drifts``: (offset, rate) state pairs); the rest random walks."""
+def transition(f: FloatArray, dt: float, structure: Structure) -> None:
+    """F over ``dt``, into ``f`` (an identity but for the entries :func:`couplings` lists and
+    the diagonal's at the bounded offsets): h += v dt - b dt^2/2, v += -b dt, c_i += r_i dt
+    for a sensor with a drift rate ``r_i``, a bounded offset decays, c *= exp(-dt / tau); the
+    rest random walks."""
+    use_bias, drifts, bounded = structure
     f[0, 1] = dt
     if use_bias:
         f[0, 2], f[1, 2] = -0.5 * dt * dt, -dt
     for j in range(drifts.shape[0]):
         f[drifts[j, 0], drifts[j, 1]] = dt
+    for c in bounded:
+        f[c, c] = math.exp(-dt / GPS_CORRELATION_S)
 
 
 @dataclass(frozen=True)
@@ -312,16 +341,13 @@ class Events:
 
 @compiled
 def process_noise(
-    q: FloatArray,
-    dt: float,
-    q_accel: float,
-    q_state: FloatArray,
-    use_bias: bool,
-    drifts: np.ndarray,
+    q: FloatArray, dt: float, q_accel: float, q_state: FloatArray, structure: Structure
 ) -> None:
     """Q over an interval ``dt``, into ``q``: white acceleration of density ``q_accel`` on
     (h, v), the bias's and the sensor states' random walks (``q_state``, one density per
-    sensor), and each drifting offset's integrated random walk."""
+    sensor; a bounded offset's Gauss-Markov increment of the same density at short spans), and
+    each drifting offset's integrated random walk."""
+    use_bias, drifts, bounded = structure
     q[:] = 0.0
     # white acceleration: [[dt^3/3, dt^2/2], [dt^2/2, dt]] q_a on (h, v)
     q[0, 0], q[0, 1], q[1, 1] = q_accel * dt**3 / 3, q_accel * dt**2 / 2, q_accel * dt
@@ -329,6 +355,10 @@ def process_noise(
     q[2, 2] = Q_BIAS * dt if use_bias else 0.0
     for i in range(q_state.size):
         q[3 + i, 3 + i] = q_state[i] * dt
+    for c in bounded:
+        # q tau / 2 (1 - exp(-2 dt / tau)): the stationary variance q tau / 2, less what the
+        # decay carries over of it
+        q[c, c] = -q_state[c - 3] * GPS_CORRELATION_S / 2 * math.expm1(-2 * dt / GPS_CORRELATION_S)
     for j in range(drifts.shape[0]):  # a drifting offset: an integrated random walk
         c, rate = drifts[j, 0], drifts[j, 1]
         q[c, c] += Q_DRIFT * dt**3 / 3
@@ -386,17 +416,22 @@ def reset_states(layout: Layout) -> np.ndarray:
 
 def prior(ev: Events, layout: Layout) -> tuple[FloatArray, FloatArray]:
     """The state and covariance before the first event: ``h`` at the first height guess, every
-    other state at 0; a loose height and velocity, the offsets' priors (``layout``'s), the
-    regressors' and the drift rates'."""
+    other state at 0; a loose height and velocity, the offsets' priors (``layout``'s; a bounded
+    offset's no wider than its stationary spread), the regressors' and the drift rates'."""
     m = layout.sign.size
     x = np.zeros(layout.n)
     x[0] = ev.h0
+    offsets = np.full(m, OFFSET_PRIOR) if layout.offset_prior is None else layout.offset_prior
+    offsets = offsets**2
+    for i in layout.bounded:
+        # wider, a decay from an unknown start is a trend that sensor noise fits: the height's
+        # level then followed a noisy barometer's trend (5-10 cm on a 2-minute flight with no
+        # ground to hold it)
+        offsets[i] = min(offsets[i], float(ev.q_state[0, i]) * GPS_CORRELATION_S / 2)
     # without the accelerometer the bias is inert: a tiny fixed variance keeps P invertible
     p = np.diag(
         [10.0**2, 3.0**2, 0.1**2 if ev.use_bias else 1e-9]
-        + list(
-            (np.full(m, OFFSET_PRIOR) if layout.offset_prior is None else layout.offset_prior) ** 2
-        )
+        + list(offsets)
         + [r.prior**2 for r in layout.regressors]
         + [DRIFT_PRIOR**2] * len(layout.drifting)
     )

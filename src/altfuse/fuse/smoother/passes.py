@@ -28,6 +28,7 @@ from altfuse.fuse.smoother.kalman import (
 from altfuse.fuse.smoother.model import (
     Events,
     Layout,
+    Structure,
     couplings,
     first_height,
     hold_still,
@@ -140,19 +141,18 @@ def _resets(ev: Events, layout: Layout) -> tuple[np.ndarray, np.ndarray, FloatAr
 
 def _dynamics(
     ev: Events, layout: Layout
-) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray]:
-    """The events' accelerations and process-noise densities, and F's structure (the drifting
-    offsets' state pairs, whether the bias is a state, F's entries off its diagonal), as the
-    kernels take them."""
+) -> tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray]:
+    """The events' accelerations and process-noise densities, and F's structure
+    (:data:`.model.Structure`) and its entries off the diagonal, as the kernels take them."""
     q_state = np.ascontiguousarray(ev.q_state, dtype=np.float64)
-    drifts = layout.drift_pairs.astype(np.int64)
-    return ev.a, ev.q_accel, q_state, drifts, ev.use_bias, couplings(ev.use_bias, drifts)
+    structure = layout.structure(ev.use_bias)
+    return ev.a, ev.q_accel, q_state, structure, couplings(ev.use_bias, structure[1])
 
 
 @compiled
 def _forward(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ran 2.4x slower)
     measured: tuple[FloatArray, np.ndarray, FloatArray, FloatArray, FloatArray],
-    dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray],
+    dynamics: tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray],
     ground: tuple[np.ndarray, np.ndarray],
     gate: float,
     start: tuple[FloatArray, FloatArray, np.ndarray, np.ndarray, FloatArray],
@@ -168,8 +168,8 @@ def _forward(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ra
 
     ``measured``: the events' times, series (:mod:`.events`), values, variances and rows of H;
     ``dynamics``: the mean acceleration over the interval ending at each event, the white
-    acceleration density there, the sensor states' densities, the drifting offsets' (offset,
-    rate) state pairs, whether the bias is a state and F's entries off its diagonal;
+    acceleration density there, the sensor states' densities, F's structure and its entries
+    off the diagonal;
     ``ground``: the events held at the datum (h = 0 and v = 0) and standing elsewhere on the
     ground (v = 0); ``start``: the prior, and per event the row of the states (``start[3]``,
     row 0: none) that return to it there (a splice) and the height they return to
@@ -177,7 +177,7 @@ def _forward(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ra
     covariances and updates (else one slot, overwritten).
     """
     t, who, z, r, h = measured
-    a, q_accel, q_state, drifts, use_bias, links = dynamics
+    a, q_accel, q_state, structure, links = dynamics
     still, landed = ground
     x, p = start[0].copy(), start[1].copy()
     reset, returning = start[2], start[3]
@@ -194,7 +194,7 @@ def _forward(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ra
         np.full(count, np.nan),
         np.full(count, np.nan),
     )
-    fl: Transition = (np.eye(n), links)
+    fl: Transition = (np.eye(n), links, structure[2])
     q, u = np.zeros((n, n)), np.zeros(n)
     work = scratch(n)
     ph = work[4]
@@ -207,8 +207,8 @@ def _forward(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ra
         if dt > 0:
             # the accelerometer as the control input: B u = [a dt^2 / 2, a dt, 0, ...]
             u[0], u[1] = 0.5 * a[k] * dt * dt, a[k] * dt
-            transition(fl[0], dt, use_bias, drifts)
-            process_noise(q, dt, q_accel[k], q_state[k], use_bias, drifts)
+            transition(fl[0], dt, structure)
+            process_noise(q, dt, q_accel[k], q_state[k], structure)
             predict(x, p, fl, q, u, work)
         if reset[k] > 0:
             # a splice: part of the state returns to the prior (h and v in every row), h at
@@ -341,7 +341,7 @@ def _backward(  # noqa: C901 (one loop: as _forward's, its steps as a helper ran
     t: FloatArray,
     filtered: tuple[FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray],
     rows: tuple[np.ndarray, FloatArray],
-    dynamics: tuple[FloatArray, FloatArray, FloatArray, np.ndarray, bool, np.ndarray],
+    dynamics: tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray],
     resets: tuple[np.ndarray, np.ndarray],
 ) -> tuple[FloatArray, FloatArray]:
     """The modified Bryson-Frazier pass (:mod:`.kalman`) back over the filtered events: the
@@ -354,9 +354,9 @@ def _backward(  # noqa: C901 (one loop: as _forward's, its steps as a helper ran
     left filtered: only the variances asked for are made of the smoothed ones."""
     xs, pf, updates, holds, held_at = filtered
     who, h = rows
-    _, _, _, drifts, use_bias, links = dynamics
+    _, _, _, structure, links = dynamics
     count, n = xs.shape
-    fl: Transition = (np.eye(n), links)
+    fl: Transition = (np.eye(n), links, structure[2])
     work = scratch(n)
     adjoint = (np.zeros(n), np.zeros((n, n)))  # after the last event: nothing to come
     p = np.zeros((n, n))  # each event's filtered covariance, unpacked
@@ -392,6 +392,6 @@ def _backward(  # noqa: C901 (one loop: as _forward's, its steps as a helper ran
         # and through the transition into k
         dt = t[k] - t[k - 1] if k > 0 else 0.0
         if dt > 0:
-            transition(fl[0], dt, use_bias, drifts)
+            transition(fl[0], dt, structure)
             adjoint_predict(adjoint, fl, work)
     return var_h, var_row
