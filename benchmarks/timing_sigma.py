@@ -15,9 +15,7 @@ out of that window; then each truth log's coverage per value.
 
 from __future__ import annotations
 
-import argparse
 import sys
-import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -26,22 +24,20 @@ import numpy as np
 from altfuse.evaluation import choose_truth
 from altfuse.fuse.smoother import SmootherParams, fused_std
 from altfuse.io import read_log
-from altfuse.pipeline import FuseOptions, prepare, run_method
-from altfuse.simulate import simulate_flight, write_simulated_log
+from altfuse.pipeline import FuseOptions, Prepared, prepare, run_method
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from accuracy import Flight, coverage, flights, label  # noqa: E402
+from accuracy import Flight, arguments, coverage, flights, label, prepared_flight  # noqa: E402
 
 GRID_S = (0.0, 0.002, 0.003, 0.004, 0.005, 0.006, 0.008, 0.010)
 WINDOW = (0.90, 0.99)
 
 
-def coverages(path: Path) -> list[float]:
+def coverages(prepared: Prepared) -> list[float]:
     """The coverage of the truth by the band of one run without the latency's term, that term
     added for every value of GRID_S (:func:`altfuse.fuse.smoother.fused_std`)."""
-    prepared = prepare(read_log(path), FuseOptions())
     truth = choose_truth(prepared.log, prepared.referred, "sim").h
     exact = FuseOptions(params={"smoother": SmootherParams(timing_sigma_s=0.0)})
     result = run_method(prepared, exact).result
@@ -50,15 +46,11 @@ def coverages(path: Path) -> list[float]:
 
 
 def truth_log(path: Path) -> tuple[str, list[float]]:
-    return path.stem, coverages(path)
+    return path.stem, coverages(prepare(read_log(path), FuseOptions()))
 
 
 def simulated(flight: Flight) -> tuple[str, list[float]]:
-    scenario, seed, faults = flight
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "flight.bin"
-        write_simulated_log(simulate_flight(scenario, seed, faults=faults), path)
-        return label(flight), coverages(path)
+    return label(flight), coverages(prepared_flight(flight))
 
 
 def summary(name: str, rows: list[tuple[str, list[float]]]) -> None:
@@ -76,11 +68,7 @@ def summary(name: str, rows: list[tuple[str, list[float]]]) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--shared", type=Path, default=ROOT.parent / "shared" / "logs")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--jobs", type=int, default=2)
-    args = parser.parse_args()
+    args = arguments(__doc__.splitlines()[0]).parse_args()
     with ProcessPoolExecutor(args.jobs) as pool:
         truth = list(pool.map(truth_log, sorted((args.shared / "truth").glob("*.BIN"))))
         sims = list(pool.map(simulated, flights(args.seeds)))

@@ -9,6 +9,7 @@ errors lie within its +-2 ``fused_std``. Used by ``tests/test_smoother_accuracy.
 
 from __future__ import annotations
 
+import argparse
 import math
 import tempfile
 from collections.abc import Sequence
@@ -19,7 +20,7 @@ import numpy as np
 from altfuse.evaluation import Evaluation, choose_truth
 from altfuse.fuse import METHODS, FusionResult
 from altfuse.io import read_log
-from altfuse.pipeline import FuseOptions, prepare, run_method
+from altfuse.pipeline import FuseOptions, Prepared, prepare, run_method
 from altfuse.simulate import (
     SCENARIOS,
     applicable_faults,
@@ -28,6 +29,7 @@ from altfuse.simulate import (
 )
 
 Flight = tuple[str, int, tuple[str, ...]]
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def flights(seeds: Sequence[int]) -> list[Flight]:
@@ -41,14 +43,30 @@ def flights(seeds: Sequence[int]) -> list[Flight]:
     return out
 
 
-def measure(flight: Flight) -> dict[str, float]:
-    """Each method's RMSE on one simulated flight, and the smoother's ``inside`` (ticks within
-    +-2 sigma) of ``ticks``."""
+def prepared_flight(flight: Flight) -> Prepared:
+    """One simulated flight written as a DataFlash log, read back and prepared as
+    ``altfuse fuse`` would."""
     scenario, seed, faults = flight
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "flight.bin"
         write_simulated_log(simulate_flight(scenario, seed, faults=faults), path)
-        prepared = prepare(read_log(path), FuseOptions())
+        return prepare(read_log(path), FuseOptions())
+
+
+def arguments(description: str) -> argparse.ArgumentParser:
+    """The options of a benchmark over the truth logs and the simulated flights: where the
+    shared logs are, the flights' seeds, the processes."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--shared", type=Path, default=ROOT.parent / "shared" / "logs")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--jobs", type=int, default=2)
+    return parser
+
+
+def measure(flight: Flight) -> dict[str, float]:
+    """Each method's RMSE on one simulated flight, and the smoother's ``inside`` (ticks within
+    +-2 sigma) of ``ticks``."""
+    prepared = prepared_flight(flight)
     truth = choose_truth(prepared.log, prepared.referred).h
     row: dict[str, float] = {}
     for method in METHODS:
