@@ -23,7 +23,13 @@ from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import NIS_CHECK, SmootherParams, fuse_smoother, model_check
 from altfuse.fuse.smoother.compiled import _forget_other_versions
 from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record
-from altfuse.fuse.smoother.model import OFFSET_PRIOR, STILL_SIGMA, Events, datum_priors
+from altfuse.fuse.smoother.model import (
+    GPS_CORRELATION_S,
+    OFFSET_PRIOR,
+    STILL_SIGMA,
+    Events,
+    datum_priors,
+)
 from altfuse.fuse.smoother.noise import (
     ACCEL_EM_GAIN,
     Q_AGREEMENT_MIN_SHARE,
@@ -37,7 +43,7 @@ from altfuse.fuse.smoother.noise import (
 from altfuse.fuse.smoother.passes import LOCKOUT_S
 from altfuse.model import Samples
 from altfuse.params import InvalidParameter
-from altfuse.pipeline import FuseOptions, fuse_log
+from altfuse.pipeline import FuseOptions, fuse_log, prepare_log, run_method
 from altfuse.simulate import simulate_flight, write_simulated_log
 from conftest import ROOT, shared_log
 from repeated import repeated_log
@@ -587,12 +593,19 @@ def test_a_long_flight_keeps_its_height_with_its_agreeing_sensors(tmp_path: Path
     (GPS_CORRELATION_S): 0.85 m at most, fused_std below 0.6 m."""
     log = tmp_path / "long.bin"
     repeated_log(shared_log("ardupilot/beastayyg_log_0036_mechanical_failure.bin"), log, 30)
-    run = fuse_log(log, FuseOptions())
-    assert run.referred.t[-1] - run.referred.t[0] > 2700.0
+    prepared = prepare_log(log, FuseOptions())
+    assert prepared.referred.t[-1] - prepared.referred.t[0] > 2700.0
+    run = run_method(prepared, FuseOptions())
+    assert run.result.params["gps_correlation_s"] == GPS_CORRELATION_S
     guard = run.provenance["guard"]
     assert guard["diverged_ticks"] == 0
     assert guard["max_excursion_m"] < 1.5
     assert np.nanmax(run.result.tick_traces["fused_std"]) < 1.0
+    # a bound of 10^6 s is a random walk over any flight: as before
+    walk = {"smoother": SmootherParams(gps_correlation_s=1e6)}
+    run = run_method(prepared, FuseOptions(params=walk))
+    assert run.provenance["guard"]["max_excursion_m"] > 3.0
+    assert np.nanmax(run.result.tick_traces["fused_std"]) > 2.0
 
 
 def test_a_sensor_left_alone_is_let_loose_though_the_estimate_never_followed_it() -> None:

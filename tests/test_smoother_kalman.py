@@ -175,7 +175,7 @@ def test_the_kernels_know_every_entry_of_f_but_the_identitys(
     # decays of the bounded states on the diagonal: one missing would be dropped silently
     layout = Layout(np.ones(M), (), drifting=drifting, bounded=bounded)
     structure = layout.structure(use_bias)
-    _, drifts, states = structure
+    _, drifts, states, _ = structure
     f = np.eye(layout.n)
     transition(f, 0.37, structure)
     changed = np.nonzero(f - np.eye(layout.n))

@@ -61,10 +61,11 @@ RESET_NONE, RESET_MOTION, RESET_DATUM = 0, 1, 2
 #: weather moves it for hours). With both random walks nothing held the height's common mode:
 #: a real 150 s flight repeated for 45 minutes had its fused height 4.2 m from GPS and
 #: barometer, which agreed within a metre, fused_std 2.6 m; over 7.4 hours 42.8 m, 160,983 of
-#: 265,476 ticks diverged. Measured at 300 / 600 / 1200 / 3600 s: that flight's largest gap
-#: from a sensor 0.95 / 0.85 / 1.94 / 3.16 m; on the 192 simulated flights, whose GPS is a
-#: random walk, the worst RMSE against the random-walk model's 1.30 / 1.13 / 1.06 / 1.04 (the
-#: smoother still the lowest of all methods on every one); the truth logs within 1 mm.
+#: 265,476 ticks diverged. Measured at 300 / 600 / 1200 / 3600 s (``benchmarks/gps_bound.py``):
+#: that flight's largest gap from a sensor 0.95 / 0.85 / 1.94 / 3.16 m; on the 192 simulated
+#: flights, whose GPS is a random walk, the worst RMSE against the random walk's 1.31 / 1.14 /
+#: 1.07 / 1.02 (the smoother still the lowest of all methods on every one at 600 s); the truth
+#: logs within 1 mm and 0.003 of coverage, 8 of 13 passing at each. ``--gps-correlation``.
 GPS_CORRELATION_S = 600.0
 #: Prior on a sensor's offset from the datum [m], where the flight says nothing better; and the
 #: fewest samples on the ground that say better.
@@ -237,7 +238,8 @@ class Layout:
     regressors: tuple[Regressor, ...]
     drifting: tuple[int, ...] = ()  # the sensors whose offset has a drift rate
     offset_prior: FloatArray | None = None  # each offset's prior sigma [m]; None: OFFSET_PRIOR
-    bounded: tuple[int, ...] = ()  # the sensors whose offset is bounded (GPS_CORRELATION_S)
+    bounded: tuple[int, ...] = ()  # the sensors whose offset is bounded (a GPS's)
+    correlation_s: float = GPS_CORRELATION_S  # ... by a Gauss-Markov process of this time [s]
 
     @property
     def n(self) -> int:
@@ -264,7 +266,7 @@ class Layout:
     def structure(self, use_bias: bool) -> Structure:
         """F's structure (:data:`Structure`), as the kernels take it."""
         bounded = np.array([3 + i for i in self.bounded], dtype=np.int64)
-        return use_bias, self.drift_pairs.astype(np.int64), bounded
+        return use_bias, self.drift_pairs.astype(np.int64), bounded, self.correlation_s
 
     def adding(self, regressors: Sequence[Regressor]) -> Layout:
         """The same with these regressors too."""
@@ -289,8 +291,9 @@ def couplings(use_bias: bool, drifts: np.ndarray) -> np.ndarray:
 
 
 #: F's structure, as the kernels take it: whether the accelerometer's bias is a state, the
-#: drifting offsets' (offset, rate) state pairs, the bounded offsets' states.
-Structure = tuple[bool, np.ndarray, np.ndarray]
+#: drifting offsets' (offset, rate) state pairs, the bounded offsets' states and their
+#: correlation time [s].
+Structure = tuple[bool, np.ndarray, np.ndarray, float]
 
 
 @compiled
@@ -299,14 +302,14 @@ def transition(f: FloatArray, dt: float, structure: Structure) -> None:
     the diagonal's at the bounded offsets): h += v dt - b dt^2/2, v += -b dt, c_i += r_i dt
     for a sensor with a drift rate ``r_i``, a bounded offset decays, c *= exp(-dt / tau); the
     rest random walks."""
-    use_bias, drifts, bounded = structure
+    use_bias, drifts, bounded, tau = structure
     f[0, 1] = dt
     if use_bias:
         f[0, 2], f[1, 2] = -0.5 * dt * dt, -dt
     for j in range(drifts.shape[0]):
         f[drifts[j, 0], drifts[j, 1]] = dt
     for c in bounded:
-        f[c, c] = math.exp(-dt / GPS_CORRELATION_S)
+        f[c, c] = math.exp(-dt / tau)
 
 
 @dataclass(frozen=True)
@@ -347,7 +350,7 @@ def process_noise(
     (h, v), the bias's and the sensor states' random walks (``q_state``, one density per
     sensor; a bounded offset's Gauss-Markov increment of the same density at short spans), and
     each drifting offset's integrated random walk."""
-    use_bias, drifts, bounded = structure
+    use_bias, drifts, bounded, tau = structure
     q[:] = 0.0
     # white acceleration: [[dt^3/3, dt^2/2], [dt^2/2, dt]] q_a on (h, v)
     q[0, 0], q[0, 1], q[1, 1] = q_accel * dt**3 / 3, q_accel * dt**2 / 2, q_accel * dt
@@ -358,7 +361,7 @@ def process_noise(
     for c in bounded:
         # q tau / 2 (1 - exp(-2 dt / tau)): the stationary variance q tau / 2, less what the
         # decay carries over of it
-        q[c, c] = -q_state[c - 3] * GPS_CORRELATION_S / 2 * math.expm1(-2 * dt / GPS_CORRELATION_S)
+        q[c, c] = -q_state[c - 3] * tau / 2 * math.expm1(-2 * dt / tau)
     for j in range(drifts.shape[0]):  # a drifting offset: an integrated random walk
         c, rate = drifts[j, 0], drifts[j, 1]
         q[c, c] += Q_DRIFT * dt**3 / 3
@@ -427,7 +430,7 @@ def prior(ev: Events, layout: Layout) -> tuple[FloatArray, FloatArray]:
         # wider, a decay from an unknown start is a trend that sensor noise fits: the height's
         # level then followed a noisy barometer's trend (5-10 cm on a 2-minute flight with no
         # ground to hold it)
-        offsets[i] = min(offsets[i], float(ev.q_state[0, i]) * GPS_CORRELATION_S / 2)
+        offsets[i] = min(offsets[i], float(ev.q_state[0, i]) * layout.correlation_s / 2)
     # without the accelerometer the bias is inert: a tiny fixed variance keeps P invertible
     p = np.diag(
         [10.0**2, 3.0**2, 0.1**2 if ev.use_bias else 1e-9]
