@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from accuracy import best_other, flights, label, measure
+from accuracy import best_other, flights, label, measure, window_counts
 
 
 def main() -> None:
@@ -53,12 +53,11 @@ def main() -> None:
     cover = {name: row["inside"] / row["ticks"] for name, row in by_label.items()}
     worst = max(ratio, key=ratio.__getitem__)
     low, high = min(cover, key=cover.__getitem__), max(cover, key=cover.__getitem__)
-    values = np.array(list(cover.values()))
+    within, above, below = window_counts(np.array(list(cover.values())))
     print(
         f"worst RMSE ratio to the best other: {ratio[worst]:.2f} ({worst}); coverage "
         f"{cover[low]:.3f} ({low}) to {cover[high]:.3f} ({high}): within 0.90-0.99 on "
-        f"{int(np.sum((values >= 0.90) & (values <= 0.99)))}, above on "
-        f"{int(np.sum(values > 0.99))}, below on {int(np.sum(values < 0.90))}"
+        f"{within}, above on {above}, below on {below}"
     )
 
 

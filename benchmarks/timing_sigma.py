@@ -29,10 +29,18 @@ from altfuse.pipeline import FuseOptions, Prepared, prepare, run_method
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from accuracy import Flight, arguments, coverage, flights, label, prepared_flight  # noqa: E402
+from accuracy import (  # noqa: E402
+    COVERAGE_WINDOW,
+    Flight,
+    arguments,
+    coverage,
+    flights,
+    label,
+    prepared_flight,
+    window_counts,
+)
 
 GRID_S = (0.0, 0.002, 0.003, 0.004, 0.005, 0.006, 0.008, 0.010)
-WINDOW = (0.90, 0.99)
 
 
 def coverages(prepared: Prepared) -> list[float]:
@@ -55,15 +63,15 @@ def simulated(flight: Flight) -> tuple[str, list[float]]:
 
 def summary(name: str, rows: list[tuple[str, list[float]]]) -> None:
     c = np.array([r[1] for r in rows])
-    lo, hi = WINDOW
+    lo, hi = COVERAGE_WINDOW
     print(f"{name}: {len(rows)} logs")
     for j, s in enumerate(GRID_S):
         col = c[:, j]
         out = np.maximum(lo - col, col - hi).clip(0.0)
+        within, above, below = window_counts(col)
         print(
             f"  {s * 1000:4.0f} ms: coverage {col.min():.3f}-{col.max():.3f}, within "
-            f"{int(np.sum((col >= lo) & (col <= hi)))}, above {int(np.sum(col > hi))}, below "
-            f"{int(np.sum(col < lo))}, worst {out.max():.3f} out of the window"
+            f"{within}, above {above}, below {below}, worst {out.max():.3f} out of the window"
         )
 
 
