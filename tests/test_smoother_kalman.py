@@ -40,11 +40,12 @@ from altfuse.fuse.smoother.passes import likelihood, likelihoods, run
 M = 2  # sensors: a GPS (its offset bounded) and a barometer, the barometer with a drift rate
 
 
-def toy(seed: int, accel: bool, spliced: bool = False) -> tuple[Events, Layout, np.ndarray]:
+def toy(
+    seed: int, accel: bool, spliced: bool = False, count: int = 300
+) -> tuple[Events, Layout, np.ndarray]:
     """Events of a simulated flight, the layout, and each event's measurement variance; with
     ``spliced``, a splice at event 150 (motion, offsets and drift rate back to the prior)."""
     rng = np.random.default_rng(seed)
-    count = 300
     t = np.cumsum(rng.uniform(0.01, 0.2, count))
     t[5] = t[4]  # two events at one instant: no prediction between them
     who = rng.integers(-1, M, count)
@@ -56,7 +57,7 @@ def toy(seed: int, accel: bool, spliced: bool = False) -> tuple[Events, Layout, 
     still = np.zeros(count, dtype=bool)
     still[:20] = who[:20] == -1  # ticks on the ground at the datum
     landed = np.zeros(count, dtype=bool)
-    landed[-30:] = who[-30:] == -1  # ticks on the ground after landing: v = 0 alone
+    landed[-count // 10 :] = who[-count // 10 :] == -1  # on the ground after landing: v = 0 alone
     q_accel = np.full(count, 0.05)
     reset = np.zeros(count, dtype=np.int64)
     reset[150] = RESET_DATUM if spliced else RESET_NONE
@@ -164,6 +165,33 @@ def test_smoother_is_filterpys_rts_smoother(seed: int, spliced: bool) -> None:
     # and smoothing did something: the first state moved from its filtered value
     filtered = run(ev, r, layout, smooth=False)
     assert np.abs(ours["x"][0] - filtered["x"][0]).max() > 1e-3
+
+
+def test_passes_over_many_blocks_are_filterpys() -> None:
+    # the backward pass filters each block again from its checkpoint: four blocks, the span
+    # on the ground at the end across the last block's start
+    ev, layout, r = toy(3, accel=False, spliced=True, count=1000)
+    block = 320
+    assert ev.landed is not None
+    assert ev.landed[: 3 * block].any()
+    assert ev.landed[3 * block :].any()
+    xf, pf, xs, ps = filterpy_passes(ev, layout, r)
+    assert_matches(run(ev, r, layout, smooth=False, block=block), ev, layout, xf, pf)
+    assert_matches(run(ev, r, layout, block=block), ev, layout, xs, ps)
+
+
+@pytest.mark.parametrize("smooth", [True, False])
+def test_blocks_change_nothing(smooth: bool) -> None:
+    # a gate that rejects samples and lets the estimate loose (whose clocks the checkpoints
+    # carry) and holds on the ground: every output the same to the bit whatever the block
+    ev, layout, r = toy(4, accel=True, spliced=True, count=3000)
+    ev = replace(ev, gate=1.5)
+    whole = run(ev, r, layout, smooth, block=ev.t.size)
+    assert (~whole["accepted"][ev.who >= 0]).sum() > 100
+    for block in (1, 7, 256):
+        ours = run(ev, r, layout, smooth, block=block)
+        for key, value in whole.items():
+            np.testing.assert_array_equal(ours[key], value, err_msg=f"{key}, block {block}")
 
 
 @pytest.mark.parametrize("use_bias", [True, False])
