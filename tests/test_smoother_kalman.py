@@ -29,7 +29,8 @@ from altfuse.fuse.smoother.model import (
     Regressor,
     couplings,
     first_height,
-    measurement_matrix,
+    measurement_row,
+    measurement_rows,
     prior,
     process_noise,
     reset_states,
@@ -130,7 +131,10 @@ def filterpy_passes(
 
 def variances(ev: Events, layout: Layout, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Of covariances ``p`` per event: h's variance, and each sample's row's (NaN at ticks)."""
-    h = measurement_matrix(layout, ev.who)
+    rows = measurement_rows(layout, ev.who)
+    h = np.zeros((ev.who.size, layout.n))
+    for k, series in enumerate(ev.who):
+        measurement_row(rows, int(series), k, h[k])
     return p[:, 0, 0], np.where(ev.who >= 0, np.einsum("ki,kij,kj->k", h, p, h), np.nan)
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from altfuse.fuse.base import FusionInput
 from altfuse.fuse.smoother.events import VELOCITY, interval_mean
-from altfuse.fuse.smoother.model import Events, Layout
+from altfuse.fuse.smoother.model import Events, Layout, measured, measurement_rows
 from altfuse.metrics import (
     MAD_TO_SIGMA,
     hold_nearest,
@@ -398,20 +398,13 @@ def em_accel(ev: Events, out: dict[str, np.ndarray], floor: FloatArray) -> Event
 def em_scale(ev: Events, layout: Layout, noise: Noise, out: dict[str, np.ndarray]) -> None:
     """EM, M-step: each series' noise scale from the smoothed residuals (in place)."""
     xs = out["x"]
-    sign = layout.sign
-    for i, entry in [*((i, i) for i in range(sign.size)), (VELOCITY, sign.size)]:
-        mine = (ev.who == i) & out["accepted"]
-        if noise.fixed[entry] or not mine.any():
+    rows = measurement_rows(layout, ev.who)
+    m = layout.sign.size
+    for i, entry in [*((i, i) for i in range(m)), (VELOCITY, m)]:
+        mine = np.flatnonzero((ev.who == i) & out["accepted"])
+        if noise.fixed[entry] or not mine.size:
             continue
-        # the measurement model's rows at these events: coefficients on (h, c_i) or on v,
-        # and on the series' regressors
-        regs = layout.of_sensor(i)
-        own = [(1, 1.0)] if i == VELOCITY else [(0, 1.0), (3 + i, sign[i])]
-        cols = [c for c, _ in own] + [state for state, _ in regs]
-        coef = np.column_stack(
-            [np.full(mine.sum(), w) for _, w in own] + [r.coef[mine] for _, r in regs]
-        )
-        resid = ev.z[mine] - np.einsum("ka,ka->k", coef, xs[mine][:, cols])
+        resid = ev.z[mine] - measured(rows, ev.who, xs, mine)
         ratio = (resid**2 + out["var_row"][mine]) / noise.base[mine]
         ratio = ratio[np.isfinite(ratio)]  # a state the filter lost (damaged stamps) says nothing
         if ratio.size:

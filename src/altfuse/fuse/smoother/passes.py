@@ -33,11 +33,13 @@ from altfuse.fuse.smoother.kalman import (
 from altfuse.fuse.smoother.model import (
     Events,
     Layout,
+    Rows,
     Structure,
     couplings,
     first_height,
     hold_still,
-    measurement_matrix,
+    measurement_row,
+    measurement_rows,
     prior,
     process_noise,
     reset_states,
@@ -101,10 +103,10 @@ def _model(ev: Events, r: FloatArray, layout: Layout) -> Model:
 
 def _measured(
     ev: Events, r: FloatArray, layout: Layout
-) -> tuple[FloatArray, np.ndarray, FloatArray, FloatArray, FloatArray]:
+) -> tuple[FloatArray, np.ndarray, FloatArray, FloatArray, Rows]:
     """The events' times, series, values, variances and rows of H, as the kernels take them."""
-    h = measurement_matrix(layout, ev.who)
-    return ev.t, ev.who.astype(np.int64), ev.z, np.asarray(r, dtype=np.float64), h
+    rows = measurement_rows(layout, ev.who)
+    return ev.t, ev.who.astype(np.int64), ev.z, np.asarray(r, dtype=np.float64), rows
 
 
 def _ground(ev: Events) -> tuple[np.ndarray, np.ndarray]:
@@ -150,7 +152,7 @@ Kept = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 #: The filter's arguments: the events' measurements, dynamics and holds on the ground, the gate,
 #: the prior and the splices' resets (:func:`_forward`).
 Model = tuple[
-    tuple[FloatArray, np.ndarray, FloatArray, FloatArray, FloatArray],
+    tuple[FloatArray, np.ndarray, FloatArray, FloatArray, Rows],
     tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray],
     tuple[np.ndarray, np.ndarray],
     float,
@@ -172,8 +174,8 @@ def _forward(model: Model, block: int) -> tuple[FloatArray, Checkpoints, Verdict
     on the ground (v = 0); the gate; the prior, and per event the row of the states (row 0:
     none) that return to it there (a splice) and the height they return to.
     """
-    t, who, h = model[0][0], model[0][1], model[0][4]
-    count, n = h.shape
+    t, who = model[0][0], model[0][1]
+    count, n = t.size, model[4][0].size
     carry = _carry(model[4], t, who, n)
     blocks = -(-count // block)
     checkpoints = (
@@ -244,7 +246,7 @@ def _filter(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ran
     posterior state and covariance, the sample's ``P H'``, ``S`` and innovation (``S`` 0 where
     it was not fused), and per event held on the ground the same of its holds. ``model``:
     :func:`_forward`'s arguments."""
-    (t, who, z, r, h), (a, q_accel, q_state, structure, links), (still, landed) = model[:3]
+    (t, who, z, r, rows), (a, q_accel, q_state, structure, links), (still, landed) = model[:3]
     gate, start = model[3], model[4]
     x, p, sensor_accepted, sensor_r, refused, clock = carry
     (xf, pf, updates, holds), keep = kept
@@ -256,7 +258,7 @@ def _filter(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ran
     fl: Transition = (np.eye(n), links, structure[2])
     q, u = np.zeros((n, n)), np.zeros(n)
     work = scratch(n)
-    ph = work[4]
+    ph, hk = work[4], np.zeros(n)  # an event's P H' and row of H
     y = s = 0.0
     for k in range(span[0], span[1]):
         dt = t[k] - previous
@@ -276,13 +278,14 @@ def _filter(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ran
         slot = k - span[0] if keep else 0
         updates[slot, n] = 0.0  # S 0: no sample fused here (a slot is used again)
         if i != TICK:
-            y, s = innovation(x, p, z[k], h[k], r[k], ph)
+            measurement_row(rows, i, k, hk)
+            y, s = innovation(x, p, z[k], hk, r[k], ph)
             # a height shut: has the estimate, or a ground, gone astray? (a vertical velocity
             # is gated too, and never a reason to let loose: it says nothing of h)
             if i >= 0 and y * y > gate * gate * s:
-                seen = (t[k], r[k], h[k, 3 + i], last_accepted, sensor_accepted, sensor_r)
+                seen = (t[k], r[k], hk[3 + i], last_accepted, sensor_accepted, sensor_r)
                 if _release(3 + i, y, (seen, refused), p):
-                    y, s = innovation(x, p, z[k], h[k], r[k], ph)
+                    y, s = innovation(x, p, z[k], hk, r[k], ph)
                 refused[3 + i, 0], refused[3 + i, 1] = t[k], math.copysign(1.0, y)
             nu[k] = y / math.sqrt(s)
         # the innovation gate: |y| <= gate sqrt(S)
@@ -407,14 +410,14 @@ def _backward(
     block's is ``block`` (``passes[0]``, :func:`_forward`'s) times that, for one more forward
     pass, run in a thread a block ahead of the backward one (two cores: about the time it
     cost before). ``passes[1]``: whether to smooth. ``model``: :func:`_forward`'s arguments."""
-    (t, who, _, _, h), dynamics, (still, landed) = model[:3]
+    (t, who, _, _, rows), dynamics, (still, landed) = model[:3]
     block, smooth = passes
-    count, n = h.shape
+    count, n = t.size, model[4][0].size
     blocks = checkpoints[0].shape[0]
     # two buffers: a block is filtered into one while the pass goes back through the other
     size = min(count, block)
     buffers = [(_carry(model[4], t, who, n), _kept(size, n, size)) for _ in range(2)]
-    events = (t, who, h, still | landed, model[4][2:4])
+    events = (t, who, rows, still | landed, model[4][2:4])
     smoothed = (np.zeros((count, n)), np.zeros(count), np.full(count, np.nan))
     adjoint = (np.zeros(n), np.zeros((n, n)))  # after the last event: nothing to come
 
@@ -438,7 +441,7 @@ def _backward(
 
 @compiled
 def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x slower)
-    events: tuple[FloatArray, np.ndarray, FloatArray, np.ndarray, tuple[np.ndarray, np.ndarray]],
+    events: tuple[FloatArray, np.ndarray, Rows, np.ndarray, tuple[np.ndarray, np.ndarray]],
     filtered: tuple[tuple[int, int], Kept, int],
     dynamics: tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray],
     adjoint: tuple[FloatArray, FloatArray],
@@ -454,7 +457,7 @@ def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x
     ``filtered``: the block's span, :func:`_filter`'s records of it and its count of events
     held. The covariances are left filtered: only the variances asked for are made of the
     smoothed ones."""
-    t, who, h, held_at, resets = events
+    t, who, rows, held_at, resets = events
     span, (xf, pf, updates, holds), held = filtered
     (xs, var_h, var_row), smooth = out
     _, _, _, structure, links = dynamics
@@ -462,6 +465,7 @@ def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x
     fl: Transition = (np.eye(n), links, structure[2])
     work = scratch(n)
     p = np.zeros((n, n))  # each event's filtered covariance, unpacked
+    hk = np.zeros(n)  # and its row of H
     lam = adjoint[0]
     unit = np.zeros((2, n))
     unit[0, 0] = unit[1, 1] = 1.0
@@ -471,7 +475,8 @@ def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x
         # smoothed at k: x_s = x - P lambda;  var = H P H' - (P H')' Lambda (P H')
         var_h[k] = smoothed_variance(p, adjoint[1], unit[0], work)
         if who[k] != TICK:
-            var_row[k] = smoothed_variance(p, adjoint[1], h[k], work)
+            measurement_row(rows, who[k], k, hk)
+            var_row[k] = smoothed_variance(p, adjoint[1], hk, work)
         for i in range(n):
             total = 0.0
             for j in range(n):
@@ -488,7 +493,7 @@ def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x
                     adjoint_update(adjoint, unit[j], (record[:n], record[n], record[n + 1]), work)
         if updates[slot, n] > 0.0:
             record = updates[slot]
-            adjoint_update(adjoint, h[k], (record[:n], record[n], record[n + 1]), work)
+            adjoint_update(adjoint, hk, (record[:n], record[n], record[n + 1]), work)
         if resets[0][k] > 0:  # the states that returned to the prior owe nothing to before
             adjoint_restart(adjoint, resets[1][resets[0][k]])
         # and through the transition into k
