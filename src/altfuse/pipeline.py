@@ -19,6 +19,7 @@ from altfuse.fuse import DEFAULT_METHOD, METHODS, FusionInput, FusionResult, Met
 from altfuse.guard import guard
 from altfuse.inertial import referred_vertical_acceleration
 from altfuse.io import read_log
+from altfuse.memory import release_free_memory
 from altfuse.model import FlightLog, Samples, Series
 from altfuse.params import Params, param, validate
 from altfuse.screen import rangefinder_param, screen
@@ -291,7 +292,11 @@ def prepare_log(path: str | Path, options: FuseOptions) -> Prepared:
         flight.size_bytes,
         time.perf_counter() - started,
     )
-    return prepare(flight, options)
+    release_free_memory()  # what the reader's tables held
+    prepared = prepare(flight, options)
+    del flight  # the screened copy goes on (Prepared.log)
+    release_free_memory()
+    return prepared
 
 
 def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:

@@ -229,6 +229,7 @@ from altfuse.fuse.smoother.noise import (
 )
 from altfuse.fuse.smoother.passes import run
 from altfuse.fuse.smoother.velocity import VELOCITY_NAME, checked_velocity, lag_regressor
+from altfuse.memory import release_free_memory
 from altfuse.model import FloatArray, Samples
 from altfuse.params import InvalidParameter, Params, param
 
@@ -362,6 +363,8 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         chosen = tested  # the GPS test's pass of this very model, where it ran
     # the forward pass of the layout chosen, where one was made with these noises
     layout, drift_gain = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
+    del tested, chosen
+    release_free_memory()  # the tests' passes, before the smoothing ones
     out = run(ev, noise.r(who), layout)
     floor = ev.q_accel
     for k in range(EM_PASSES):
@@ -370,6 +373,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         if params.accel_noise_m2_s3 is None:  # a density the user gave is kept
             ev = em_accel(ev, out, floor)
         del out  # its states go before the next pass's
+        release_free_memory()
         out = run(ev, noise.r(who), layout)
 
     tick = who == -1
