@@ -38,6 +38,7 @@ import os
 import signal
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -115,15 +116,22 @@ class Index:
     size: int
     mapped: mmap.mmap | None = field(default=None, repr=False)  # the mapping ``data`` views
 
+    @cached_property
+    def per_type(self) -> npt.NDArray[np.int64]:
+        """The records of each type id, counted a megabyte of types at a time: ``bincount``
+        takes its input as 8-byte integers (64 MB for the 8 million records of a 300 MB log,
+        the reader's peak)."""
+        out = np.zeros(256, dtype=np.int64)
+        for start in range(0, self.types.size, 1 << 20):
+            out += np.bincount(self.types[start : start + (1 << 20)], minlength=256)
+        return out
+
     @property
     def decoded_bytes(self) -> int:
-        lengths = np.zeros(256, dtype=np.int64)
-        for f in self.formats.values():
-            lengths[f.type_id] = f.length
-        return int(lengths[self.types].sum())
+        return sum(int(self.per_type[t]) * f.length for t, f in self.formats.items())
 
     def counts(self) -> dict[str, int]:
-        per_type = np.bincount(self.types, minlength=256)
+        per_type = self.per_type
         return {f.name: int(per_type[t]) for t, f in self.formats.items() if per_type[t]}
 
     def records(self, type_id: int) -> npt.NDArray[Any]:
