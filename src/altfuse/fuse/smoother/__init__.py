@@ -365,28 +365,16 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     layout, drift_gain = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
     del tested, chosen
     release_free_memory()  # the tests' passes, before the smoothing ones
-    out = run(ev, noise.r(who), layout)
     floor = ev.q_accel
-    for k in range(EM_PASSES):
-        progress.info("smoother: noise pass %d of %d (%d events)", k + 1, EM_PASSES, times.size)
-        em_scale(ev, layout, noise, out)
-        if params.accel_noise_m2_s3 is None:  # a density the user gave is kept
-            ev = em_accel(ev, out, floor)
-        del out  # its states go before the next pass's
-        release_free_memory()
-        out = run(ev, noise.r(who), layout)
+    ev, out = _smoothed(ev, layout, noise, params.accel_noise_m2_s3 is None)
 
     tick = who == -1
-    xs, var_h = out["x"][tick], out["var_h"][tick]
-    weights, valid = contributions(who, out["gain_h"], inputs.z)
-    # the model's check: a sensor's squared normalised innovations average 1 where its noise
-    # and the estimate's uncertainty are right (below: too pessimistic)
+    xs, var_h, gain_h = out["x"][tick], out["var_h"][tick], out["gain_h"]
     series = [*enumerate(names)] + ([(VELOCITY, VELOCITY_NAME)] if velocity is not None else [])
-    nis = {
-        f"nis_{name}": float(np.mean(out["nu"][(who == i) & out["accepted"]] ** 2))
-        for i, name in series
-        if ((who == i) & out["accepted"]).any()
-    }
+    nis, rejected = _innovation_checks(out, who, series)
+    del out  # the events' states, before the result's arrays
+    release_free_memory()
+    weights, valid = contributions(who, gain_h, inputs.z)
     n_valid = np.isfinite(inputs.z).sum(axis=1)
     status = np.where(n_valid == 1, SINGLE, np.where(valid, FUSED, NONE))
     return FusionResult(
@@ -422,13 +410,45 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             # the GPS's vertical velocity: its samples fused, and refused by its heights' slope
             f"{VELOCITY_NAME}_samples": int((who == VELOCITY).sum()),
             f"{VELOCITY_NAME}_refused": velocity_refused,
-            **{
-                f"rejected_{name}": int(((who == i) & ~out["accepted"]).sum()) for i, name in series
-            },
+            **rejected,
             **nis,
             "model_check": model_check(nis),
         },
     )
+
+
+def _smoothed(
+    ev: Events, layout: Layout, noise: Noise, learn_accel: bool
+) -> tuple[Events, dict[str, np.ndarray]]:
+    """The smoothing passes with EM: each series' noise scale (in ``noise``, in place) and,
+    with ``learn_accel`` (no density given), the acceleration noise refined by ``EM_PASSES``
+    M-steps, each followed by a pass; the events as refined, and the last pass."""
+    floor = ev.q_accel
+    out = run(ev, noise.r(ev.who), layout)
+    for k in range(EM_PASSES):
+        progress.info("smoother: noise pass %d of %d (%d events)", k + 1, EM_PASSES, ev.t.size)
+        em_scale(ev, layout, noise, out)
+        if learn_accel:
+            ev = em_accel(ev, out, floor)
+        del out  # its states go before the next pass's
+        release_free_memory()
+        out = run(ev, noise.r(ev.who), layout)
+    return ev, out
+
+
+def _innovation_checks(
+    out: dict[str, np.ndarray], who: np.ndarray, series: list[tuple[int, str]]
+) -> tuple[dict[str, float], dict[str, int]]:
+    """Per series of ``out``'s pass: the mean squared normalised innovation of its accepted
+    samples (the model's check: 1 where its noise and the estimate's uncertainty are right;
+    below, too pessimistic), and how many of its samples were rejected."""
+    accepted = out["accepted"]
+    nis = {
+        f"nis_{name}": float(np.mean(out["nu"][(who == i) & accepted] ** 2))
+        for i, name in series
+        if ((who == i) & accepted).any()
+    }
+    return nis, {f"rejected_{name}": int(((who == i) & ~accepted).sum()) for i, name in series}
 
 
 def fused_std(var_h: FloatArray, v: FloatArray, timing_sigma_s: float) -> FloatArray:

@@ -106,7 +106,8 @@ def _measured(
 ) -> tuple[FloatArray, np.ndarray, FloatArray, FloatArray, Rows]:
     """The events' times, series, values, variances and rows of H, as the kernels take them."""
     rows = measurement_rows(layout, ev.who)
-    return ev.t, ev.who.astype(np.int64), ev.z, np.asarray(r, dtype=np.float64), rows
+    who = np.asarray(ev.who, dtype=np.int64)  # no copy where it is one already
+    return ev.t, who, ev.z, np.asarray(r, dtype=np.float64), rows
 
 
 def _ground(ev: Events) -> tuple[np.ndarray, np.ndarray]:
