@@ -351,6 +351,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         first_height(who, values),
         landed, reset_events(times, inputs.splices),
     )  # fmt: skip
+    del position, q_added  # in the noises, the layout and the events now
     r = noise.r(who)  # before EM: the local noises as they are
     ev, stable_gain, tested = _gps_stability(inputs, ev, r, layout, params.offset_noise_m2_s)
     physical = ev
@@ -363,7 +364,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         chosen = tested  # the GPS test's pass of this very model, where it ran
     # the forward pass of the layout chosen, where one was made with these noises
     layout, drift_gain = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
-    del tested, chosen
+    del tested, chosen, r
     release_free_memory()  # the tests' passes, before the smoothing ones
     floor = ev.q_accel
     ev, out = _smoothed(ev, layout, noise, params.accel_noise_m2_s3 is None)

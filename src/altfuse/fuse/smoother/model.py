@@ -127,7 +127,7 @@ def still_events(
 def reset_events(times: FloatArray, splices: Sequence[tuple[float, bool]]) -> np.ndarray:
     """Per event, what a splice resets there (RESET_*): at the first event of each segment
     after the first (``splices``: its start and whether it was referred to a ground)."""
-    out = np.zeros(times.size, dtype=np.int64)
+    out = np.zeros(times.size, dtype=np.int8)
     for start, grounded in splices:
         k = int(np.searchsorted(times, start))
         if k < times.size:

@@ -122,8 +122,10 @@ def _resets(ev: Events, layout: Layout) -> tuple[np.ndarray, np.ndarray, FloatAr
     """The events at which part of the state returns to its prior (a splice: 0 none, else the
     row of ``reset_states`` to return), those rows, and the height the prior takes there (the
     segment's :func:`first_height`; NaN at other events), as the kernels take them."""
-    kinds = np.asarray(np.zeros(ev.t.size) if ev.reset is None else ev.reset, dtype=np.int64)
-    heights = np.full(ev.t.size, np.nan)
+    none = np.zeros(ev.t.size, dtype=np.int8)
+    kinds = none if ev.reset is None else np.asarray(ev.reset, dtype=np.int8)
+    # read at a splice only: none without one (an event's worth is 6 MB on a 7-hour log)
+    heights = np.full(ev.t.size if kinds.any() else 0, np.nan)
     for k in np.flatnonzero(kinds):
         heights[k] = first_height(ev.who, ev.z, int(k), ev.h0)
     return kinds, reset_states(layout), heights
