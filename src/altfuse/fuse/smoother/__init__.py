@@ -429,9 +429,11 @@ def _smoothed(
     for k in range(EM_PASSES):
         progress.info("smoother: noise pass %d of %d (%d events)", k + 1, EM_PASSES, ev.t.size)
         em_scale(ev, layout, noise, out)
+        states = {"x": out["x"]}
+        del out  # but its states, before em_accel's arrays
         if learn_accel:
-            ev = em_accel(ev, out, floor)
-        del out  # its states go before the next pass's
+            ev = em_accel(ev, states, floor)
+        del states  # before the next pass's
         release_free_memory()
         out = run(ev, noise.r(ev.who), layout)
     return ev, out
