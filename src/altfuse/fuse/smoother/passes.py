@@ -69,8 +69,8 @@ def run(
     models. ``block``: the events between two checkpoints of the forward filter (:func:`_backward`).
     """
     model = _model(ev, r, layout)
-    _, checkpoints, verdicts = _forward(model, block)
-    x, var_h, var_row = _backward(model, checkpoints, verdicts, (block, smooth))
+    _, checkpoints, verdicts, kept = _forward(model, block, True)
+    x, var_h, var_row = _backward(model, (checkpoints, kept), verdicts, (block, smooth))
     gain_h, accepted, loglik, nu = verdicts
     return {
         "x": x, "var_h": var_h, "var_row": var_row, "gain_h": gain_h, "accepted": accepted,
@@ -82,7 +82,7 @@ def likelihood(ev: Events, r: FloatArray, layout: Layout) -> dict[str, np.ndarra
     """The forward filter's verdicts alone: which samples it accepted and their log-likelihood,
     and its state after the last event (``last``: a constant state's estimate from the whole
     flight); :func:`run` without the backward pass."""
-    last, _, verdicts = _forward(_model(ev, r, layout), BLOCK)
+    last, _, verdicts, _ = _forward(_model(ev, r, layout), BLOCK, False)
     return {"accepted": verdicts[1], "loglik": verdicts[2], "last": last}
 
 
@@ -152,6 +152,8 @@ Checkpoints = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, 
 Verdicts = tuple[FloatArray, np.ndarray, FloatArray, FloatArray]
 #: What the backward pass needs of a block's events (:func:`_kept`).
 Kept = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+#: Two filter states and records a block's worth (:func:`_forward`, :func:`_refilter`).
+Buffers = tuple[tuple[Carry, Kept], tuple[Carry, Kept]]
 #: The filter's arguments: the events' measurements, dynamics and holds on the ground, the gate,
 #: the prior and the splices' resets (:func:`_forward`).
 Model = tuple[
@@ -164,11 +166,16 @@ Model = tuple[
 
 
 @compiled
-def _forward(model: Model, block: int) -> tuple[FloatArray, Checkpoints, Verdicts]:
+def _forward(
+    model: Model, block: int, keep: bool
+) -> tuple[FloatArray, Checkpoints, Verdicts, tuple[Buffers, int]]:
     """The forward filter over every event (:func:`_filter`): its state after the last, its
     whole state before every ``block``-th event (the backward pass runs it again from there),
-    and per sample its gain on h, whether it passed the gate, its log-likelihood and its
-    normalised innovation ``y / sqrt(S)``.
+    per sample its gain on h, whether it passed the gate, its log-likelihood and its
+    normalised innovation ``y / sqrt(S)``; and two buffers for the backward pass to filter a
+    block again into (:func:`_refilter`), of a block's size with ``keep`` (else of one event),
+    the last block's records already in its own (a flight of one block is filtered once), and
+    how many of its events were held on the ground.
 
     ``model``: the events' times, series (:mod:`.events`), values, variances and rows of H;
     their dynamics: the mean acceleration over the interval ending at each event, the white
@@ -189,12 +196,23 @@ def _forward(model: Model, block: int) -> tuple[FloatArray, Checkpoints, Verdict
         np.zeros(count), np.zeros(count, dtype=np.bool_), np.full(count, np.nan),
         np.full(count, np.nan),
     )  # fmt: skip
+    size = min(count, block) if keep else 1
+    buffers = (
+        (_carry(model[4], t, who, n), _kept(size, n, size)),
+        (_carry(model[4], t, who, n), _kept(size, n, size)),
+    )
     slot = _kept(1, n, 1)  # nothing kept: one slot, overwritten
+    held = 0
     for b in range(blocks):
         _checkpoint(carry, checkpoints, b, True)
         span = (b * block, min((b + 1) * block, count))
-        _filter(model, span, carry, (slot, False), verdicts)
-    return carry[0], checkpoints, verdicts
+        if keep and b == blocks - 1:
+            first_held = int(carry[5][2])
+            _filter(model, span, carry, (buffers[b % 2][1], True), verdicts)
+            held = int(carry[5][2]) - first_held
+        else:
+            _filter(model, span, carry, (slot, False), verdicts)
+    return carry[0], checkpoints, verdicts, (buffers, held)
 
 
 @compiled
@@ -401,7 +419,10 @@ def _release(
 
 
 def _backward(
-    model: Model, checkpoints: Checkpoints, verdicts: Verdicts, passes: tuple[int, bool]
+    model: Model,
+    forward: tuple[Checkpoints, tuple[Buffers, int]],
+    verdicts: Verdicts,
+    passes: tuple[int, bool],
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The smoothed (or, without ``smooth``, the filtered) states at every event, the variance
     of ``h`` and of each sample's own row ``H x`` (NaN at a tick): back over the blocks of
@@ -412,34 +433,51 @@ def _backward(
     cost 280 bytes an event with six states: 222 MB, the peak of a 7.4-hour log's run; a
     block's is ``block`` (``passes[0]``, :func:`_forward`'s) times that, for one more forward
     pass, run in a thread a block ahead of the backward one (two cores: about the time it
-    cost before). ``passes[1]``: whether to smooth. ``model``: :func:`_forward`'s arguments."""
+    cost before). ``passes[1]``: whether to smooth. ``model``: :func:`_forward`'s arguments,
+    ``forward`` its checkpoints and buffers."""
     (t, who, _, _, rows), dynamics, (still, landed) = model[:3]
     block, smooth = passes
+    # a block is filtered again into one buffer while the pass goes back through the other
+    checkpoints, (buffers, last_held) = forward
     count, n = t.size, model[4][0].size
     blocks = checkpoints[0].shape[0]
-    # two buffers: a block is filtered into one while the pass goes back through the other
-    size = min(count, block)
-    buffers = [(_carry(model[4], t, who, n), _kept(size, n, size)) for _ in range(2)]
     events = (t, who, rows, still | landed, model[4][2:4])
     smoothed = (np.zeros((count, n)), np.zeros(count), np.full(count, np.nan))
     adjoint = (np.zeros(n), np.zeros((n, n)))  # after the last event: nothing to come
 
     def refilter(b: int) -> tuple[tuple[int, int], Kept, int]:
-        carry, kept = buffers[b % 2]
-        _checkpoint(carry, checkpoints, b, False)
         span = (b * block, min((b + 1) * block, count))
-        first_held = int(carry[5][2])
-        _filter(model, span, carry, (kept, True), verdicts)
-        return span, kept, int(carry[5][2]) - first_held
+        buffer = buffers[b % 2]
+        return span, buffer[1], _refilter(model, (checkpoints, b), verdicts, span, buffer)
 
+    # the last block as the forward pass kept it
+    span = ((blocks - 1) * block, count)
+    filtered = (span, buffers[(blocks - 1) % 2][1], last_held)
     with ThreadPoolExecutor(1, thread_name_prefix="altfuse-pass") as pool:
-        ahead = pool.submit(refilter, blocks - 1) if blocks else None
         for b in range(blocks - 1, -1, -1):
-            assert ahead is not None
-            filtered = ahead.result()
             ahead = pool.submit(refilter, b - 1) if b else None
             _back(events, filtered, dynamics, adjoint, (smoothed, smooth))
+            if ahead is not None:
+                filtered = ahead.result()
     return smoothed
+
+
+@compiled
+def _refilter(
+    model: Model,
+    checkpoint: tuple[Checkpoints, int],
+    verdicts: Verdicts,
+    span: tuple[int, int],
+    buffer: tuple[Carry, Kept],
+) -> int:
+    """The events of ``span`` filtered again from their block's checkpoint (``checkpoint``:
+    the checkpoints and the block's), what the backward pass needs of them into ``buffer``;
+    how many were held on the ground."""
+    carry, kept = buffer
+    _checkpoint(carry, checkpoint[0], checkpoint[1], False)
+    first_held = int(carry[5][2])
+    _filter(model, span, carry, (kept, True), verdicts)
+    return int(carry[5][2]) - first_held
 
 
 @compiled
