@@ -255,7 +255,7 @@ def _checkpoint(carry: Carry, checkpoints: Checkpoints, b: int, save: bool) -> N
 
 
 @compiled
-def _filter(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ran 2.4x slower)
+def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tuples ran 2.4x slower)
     model: Model,
     span: tuple[int, int],
     carry: Carry,
@@ -297,8 +297,9 @@ def _filter(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ran
             restart(x, p, (start[0], start[1]), returning[reset[k]])
             x[0] = start[4][k]
         i = who[k]
-        slot = k - span[0] if keep else 0
-        updates[slot, n] = 0.0  # S 0: no sample fused here (a slot is used again)
+        slot = k - span[0]
+        if keep:
+            updates[slot, n] = 0.0  # S 0: no sample fused here (a slot is used again)
         if i != TICK:
             measurement_row(rows, i, k, hk)
             y, s = innovation(x, p, z[k], hk, r[k], ph)
@@ -312,8 +313,9 @@ def _filter(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ran
             nu[k] = y / math.sqrt(s)
         # the innovation gate: |y| <= gate sqrt(S)
         if i != TICK and y * y <= gate * gate * s:
-            updates[slot, :n] = ph
-            updates[slot, n], updates[slot, n + 1] = s, y
+            if keep:
+                updates[slot, :n] = ph
+                updates[slot, n], updates[slot, n + 1] = s, y
             gain_h[k] = abs(update(x, p, y, s, ph))
             accepted[k] = True
             if i >= 0:  # a height: the lockout's clocks
@@ -324,8 +326,9 @@ def _filter(  # noqa: PLR0915 (one loop: its steps as a helper taking tuples ran
         if still[k] or landed[k]:
             hold_still(x, p, holds[held - first_held if keep else 0], still[k])
             held += 1
-        xf[slot] = x
-        pack(p, pf[slot])
+        if keep:
+            xf[slot] = x
+            pack(p, pf[slot])
     clock[0], clock[1], clock[2] = previous, last_accepted, held
 
 
