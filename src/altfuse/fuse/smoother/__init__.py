@@ -367,7 +367,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     del tested, chosen, r
     release_free_memory()  # the tests' passes, before the smoothing ones
     floor = ev.q_accel
-    ev, out = _smoothed(ev, layout, noise, params.accel_noise_m2_s3 is None)
+    ev, out = _smoothed(ev, layout, noise, floor if params.accel_noise_m2_s3 is None else None)
 
     tick = who == -1
     xs, var_h, gain_h = out["x"][tick], out["var_h"][tick], out["gain_h"]
@@ -419,19 +419,19 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
 
 
 def _smoothed(
-    ev: Events, layout: Layout, noise: Noise, learn_accel: bool
+    ev: Events, layout: Layout, noise: Noise, floor: FloatArray | None
 ) -> tuple[Events, dict[str, np.ndarray]]:
-    """The smoothing passes with EM: each series' noise scale (in ``noise``, in place) and,
-    with ``learn_accel`` (no density given), the acceleration noise refined by ``EM_PASSES``
-    M-steps, each followed by a pass; the events as refined, and the last pass."""
-    floor = ev.q_accel
+    """The smoothing passes with EM: each series' noise scale (in ``noise``, in place) and the
+    acceleration noise, never below ``floor`` (None: a density the user gave, kept), refined
+    by ``EM_PASSES`` M-steps, each followed by a pass; the events as refined, and the last
+    pass."""
     out = run(ev, noise.r(ev.who), layout)
     for k in range(EM_PASSES):
         progress.info("smoother: noise pass %d of %d (%d events)", k + 1, EM_PASSES, ev.t.size)
         em_scale(ev, layout, noise, out)
         states = {"x": out["x"]}
         del out  # but its states, before em_accel's arrays
-        if learn_accel:
+        if floor is not None:
             ev = em_accel(ev, states, floor)
         del states  # before the next pass's
         release_free_memory()

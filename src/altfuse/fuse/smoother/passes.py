@@ -153,8 +153,8 @@ Checkpoints = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, 
 Verdicts = tuple[FloatArray, np.ndarray, FloatArray, FloatArray]
 #: What the backward pass needs of a block's events (:func:`_kept`).
 Kept = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
-#: Two filter states and records a block's worth (:func:`_forward`, :func:`_refilter`).
-Buffers = tuple[tuple[Carry, Kept], tuple[Carry, Kept]]
+#: Two blocks' worth of records (:func:`_forward`, :func:`_refilter`).
+Buffers = tuple[Kept, Kept]
 #: The filter's arguments: the events' measurements, dynamics and holds on the ground, the gate,
 #: the prior and the splices' resets (:func:`_forward`).
 Model = tuple[
@@ -197,23 +197,15 @@ def _forward(
         np.zeros(count), np.zeros(count, dtype=np.bool_), np.full(count, np.nan),
         np.full(count, np.nan),
     )  # fmt: skip
-    size = min(count, block) if keep else 1
-    buffers = (
-        (_carry(model[4], t, who, n), _kept(size, n, size)),
-        (_carry(model[4], t, who, n), _kept(size, n, size)),
-    )
-    slot = _kept(1, n, 1)  # nothing kept: one slot, overwritten
-    held = 0
+    size = min(count, block) if keep else 1  # else only a hold's scratch
+    buffers = (_kept(size, n, size), _kept(size, n, size))
+    first_held = 0
     for b in range(blocks):
-        _checkpoint(carry, checkpoints, b, True)
+        _save(carry, checkpoints, b)
         span = (b * block, min((b + 1) * block, count))
-        if keep and b == blocks - 1:
-            first_held = int(carry[5][2])
-            _filter(model, span, carry, (buffers[b % 2][1], True), verdicts)
-            held = int(carry[5][2]) - first_held
-        else:
-            _filter(model, span, carry, (slot, False), verdicts)
-    return carry[0], checkpoints, verdicts, (buffers, held)
+        first_held = int(carry[5][2])
+        _filter(model, span, carry, (buffers[b % 2], keep and b == blocks - 1), verdicts)
+    return carry[0], checkpoints, verdicts, (buffers, int(carry[5][2]) - first_held)
 
 
 @compiled
@@ -236,22 +228,19 @@ def _carry(
 
 
 @compiled
-def _checkpoint(carry: Carry, checkpoints: Checkpoints, b: int, save: bool) -> None:
-    """The filter's state ``carry`` into checkpoint ``b`` (``save``), or back from it."""
-    if save:
-        checkpoints[0][b], checkpoints[1][b], checkpoints[2][b] = carry[0], carry[1], carry[2]
-        checkpoints[3][b], checkpoints[4][b], checkpoints[5][b] = carry[3], carry[4], carry[5]
-    else:
-        carry[0][:], carry[1][:], carry[2][:] = (
-            checkpoints[0][b],
-            checkpoints[1][b],
-            checkpoints[2][b],
-        )
-        carry[3][:], carry[4][:], carry[5][:] = (
-            checkpoints[3][b],
-            checkpoints[4][b],
-            checkpoints[5][b],
-        )
+def _save(carry: Carry, checkpoints: Checkpoints, b: int) -> None:
+    """The filter's state ``carry`` into checkpoint ``b``."""
+    checkpoints[0][b], checkpoints[1][b], checkpoints[2][b] = carry[0], carry[1], carry[2]
+    checkpoints[3][b], checkpoints[4][b], checkpoints[5][b] = carry[3], carry[4], carry[5]
+
+
+@compiled
+def _restored(checkpoints: Checkpoints, b: int) -> Carry:
+    """The filter's state at checkpoint ``b``, a copy."""
+    return (
+        checkpoints[0][b].copy(), checkpoints[1][b].copy(), checkpoints[2][b].copy(),
+        checkpoints[3][b].copy(), checkpoints[4][b].copy(), checkpoints[5][b].copy(),
+    )  # fmt: skip
 
 
 @compiled
@@ -451,12 +440,12 @@ def _backward(
 
     def refilter(b: int) -> tuple[tuple[int, int], Kept, int]:
         span = (b * block, min((b + 1) * block, count))
-        buffer = buffers[b % 2]
-        return span, buffer[1], _refilter(model, (checkpoints, b), verdicts, span, buffer)
+        kept = buffers[b % 2]
+        return span, kept, _refilter(model, (checkpoints, b), verdicts, span, kept)
 
     # the last block as the forward pass kept it
     span = ((blocks - 1) * block, count)
-    filtered = (span, buffers[(blocks - 1) % 2][1], last_held)
+    filtered = (span, buffers[(blocks - 1) % 2], last_held)
     with ThreadPoolExecutor(1, thread_name_prefix="altfuse-pass") as pool:
         for b in range(blocks - 1, -1, -1):
             ahead = pool.submit(refilter, b - 1) if b else None
@@ -472,13 +461,12 @@ def _refilter(
     checkpoint: tuple[Checkpoints, int],
     verdicts: Verdicts,
     span: tuple[int, int],
-    buffer: tuple[Carry, Kept],
+    kept: Kept,
 ) -> int:
     """The events of ``span`` filtered again from their block's checkpoint (``checkpoint``:
-    the checkpoints and the block's), what the backward pass needs of them into ``buffer``;
+    the checkpoints and the block's), what the backward pass needs of them into ``kept``;
     how many were held on the ground."""
-    carry, kept = buffer
-    _checkpoint(carry, checkpoint[0], checkpoint[1], False)
+    carry = _restored(*checkpoint)
     first_held = int(carry[5][2])
     _filter(model, span, carry, (kept, True), verdicts)
     return int(carry[5][2]) - first_held
