@@ -17,6 +17,7 @@ from pymavlink import DFReader
 
 from altfuse.io.dataflash import WANTED_TYPES, _Records
 from altfuse.io.fastdf import index_file
+from altfuse.io.framing import FORMAT_TO_STRUCT
 from altfuse.simulate import applicable_faults, simulate_flight, write_simulated_log
 from conftest import ROOT, SHARED_LOGS, ardupilot_logs, shared_log
 
@@ -72,3 +73,8 @@ def test_fresh_simulator_output_with_every_fault(tmp_path: Path) -> None:
 def test_shared_logs_are_present() -> None:
     shared_log("ardupilot")
     assert len(ardupilot_logs()) == 11, SHARED_LOGS
+
+
+def test_format_table_is_pymavlinks() -> None:
+    # altfuse holds a copy of the authority's table (importing pymavlink's costs 25 ms a run)
+    assert FORMAT_TO_STRUCT == DFReader.FORMAT_TO_STRUCT

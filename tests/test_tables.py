@@ -158,6 +158,8 @@ def test_a_parquet_batch_writes_its_summary_as_parquet_too(tmp_path: Path) -> No
         np.array([3, -1, 2**40]),
         np.array([True, False, True] * 5),
         np.array(["fused", "single", "none", "diverged"]),
+        np.array(["höhe", "m²", "höhe", "", "m²"]),  # labels repeated, taken per row
+        np.zeros(0, dtype="U1"),
         np.array(["höhe", None, "", "m²"], dtype=object),
         np.array(["ok", np.nan, None], dtype=object),  # a summary's text, NaN where none
         np.zeros(0),
@@ -172,14 +174,16 @@ def test_an_arrow_column_is_pyarrows_from_pandas_array(values: np.ndarray) -> No
 
 
 def test_fuse_imports_neither_pandas_nor_scipy(tmp_path: Path) -> None:
-    """Their imports were 0.5 s of the 1.3 s fuse took on the sample log (issue 17)."""
+    """Their imports were 0.5 s of the 1.3 s fuse took on the sample log (issue 17); pymavlink's
+    and pyarrow.compute's 60 ms of 1.0 s since."""
     code = (
         "import sys\n"
         "from altfuse.cli import main\n"
         f"sys.argv = ['altfuse', '-q', 'fuse', {str(SAMPLE_LOG)!r}, '-o', "
         f"{str(tmp_path / 'o.csv')!r}]\n"
         "try:\n    main()\nexcept SystemExit as exc:\n    assert exc.code == 0, exc.code\n"
-        "loaded = [m for m in ('pandas', 'scipy.interpolate', 'matplotlib') if m in sys.modules]\n"
+        "loaded = [m for m in ('pandas', 'scipy.interpolate', 'matplotlib', 'pymavlink', "
+        "'pyarrow.compute') if m in sys.modules]\n"
         "print('loaded:', ','.join(loaded))\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

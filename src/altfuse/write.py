@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from altfuse.errors import AltfuseError, ParameterError
 
@@ -135,25 +136,31 @@ def arrow_column(values: np.ndarray) -> Any:
         # a column of a few labels (a fused table's status): each distinct label encoded once,
         # then taken per row in C (265,476 rows: 0.35 s encoded row by row, 0.13 s so)
         labels, which = np.unique(values, return_inverse=True)
-        return _strings(labels).take(arrow_column(which.ravel()))
+        return _strings(list(labels), which.ravel())
     if kind == "O" and all(isinstance(v, str) or v is None for v in values):
-        return _strings(values)
+        return _strings(list(values), np.arange(n))
     return pa.array(values, from_pandas=True)
 
 
-def _strings(values: np.ndarray) -> Any:
-    """Text (None as null) as an Arrow string array, built from its buffers."""
+def _strings(labels: list[str | None], which: npt.NDArray[np.intp]) -> Any:
+    """Text as an Arrow string array, row ``i`` being ``labels[which[i]]`` (None: null), built
+    from its buffers by numpy (Arrow's ``take`` would import pyarrow.compute: 37 ms of a small
+    log's run)."""
     import pyarrow as pa
 
-    n = values.size
-    missing = np.array([v is None for v in values], dtype=bool)
-    encoded = [b"" if v is None else str(v).encode() for v in values]
-    offsets = np.zeros(n + 1, dtype=np.int32)
-    np.cumsum([len(e) for e in encoded], out=offsets[1:])
+    encoded = [b"" if v is None else str(v).encode() for v in labels]
+    lengths = np.array([len(e) for e in encoded], dtype=np.int32)
+    width = max(int(lengths.max(initial=0)), 1)
+    table = np.array(encoded, dtype=f"S{width}").view(np.uint8).reshape(len(encoded), width)
+    row_lengths = lengths[which]
+    offsets = np.zeros(which.size + 1, dtype=np.int32)
+    np.cumsum(row_lengths, out=offsets[1:])
+    data = table[which][np.arange(width) < row_lengths[:, None]].tobytes()
+    missing = np.array([v is None for v in labels], dtype=bool)[which]
     nulls = int(missing.sum())
     validity = pa.py_buffer(np.packbits(~missing, bitorder="little")) if nulls else None
-    buffers = [validity, pa.py_buffer(offsets), pa.py_buffer(b"".join(encoded))]
-    return pa.Array.from_buffers(pa.string(), n, buffers, nulls)
+    buffers = [validity, pa.py_buffer(offsets), pa.py_buffer(data)]
+    return pa.Array.from_buffers(pa.string(), which.size, buffers, nulls)
 
 
 def _numeric(kind: Any) -> bool:

@@ -40,11 +40,11 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from pymavlink.DFReader import FORMAT_TO_STRUCT
 
 from altfuse.errors import LogReadError
 from altfuse.io import hashing
 from altfuse.io.fastdf import Format, Index, _text, index_file
+from altfuse.io.framing import FORMAT_TO_STRUCT
 from altfuse.model import (
     Attitude,
     FlightLog,

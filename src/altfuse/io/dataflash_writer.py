@@ -12,9 +12,7 @@ from __future__ import annotations
 import struct
 from typing import BinaryIO
 
-from pymavlink.DFReader import FORMAT_TO_STRUCT
-
-from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_TYPE, HEADER, SYNC
+from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_TYPE, FORMAT_TO_STRUCT, HEADER, SYNC
 
 #: Unit and multiplier ids as ArduPilot defines them (a subset).
 UNITS = {

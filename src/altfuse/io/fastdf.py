@@ -1,7 +1,8 @@
 """Vectorised DataFlash decoding: per-type column arrays straight from the file's bytes.
 
-pymavlink stays the authority on the format: its format-character table (``FORMAT_TO_STRUCT``)
-gives every field's binary layout and scale, and the tests compare every value with its decoding.
+pymavlink stays the authority on the format: its format-character table (``FORMAT_TO_STRUCT``,
+held in :mod:`.framing`, tested equal) gives every field's binary layout and scale, and the tests
+compare every value with its decoding.
 What this module changes is the *how*: instead of one Python object per record, it
 
 1. memory-maps the file read-only and finds, in one compiled pass, the FMT records (type 128,
@@ -45,10 +46,17 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from numpy.lib.stride_tricks import as_strided
-from pymavlink.DFReader import FORMAT_TO_STRUCT
 
 from altfuse.compiled import compiled
-from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_LENGTH, FMT_TYPE, HEADER, SYNC
+from altfuse.io.framing import (
+    FMT_COLUMNS,
+    FMT_FORMAT,
+    FMT_LENGTH,
+    FMT_TYPE,
+    FORMAT_TO_STRUCT,
+    HEADER,
+    SYNC,
+)
 
 HEAD1, HEAD2 = SYNC
 _CHUNK = 1 << 24  # the file searched and walked in 16 MiB chunks: bounded temporaries
