@@ -10,9 +10,17 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from altfuse.evaluation import Evaluation, evaluate_prepared, truth_or_none
-from altfuse.fuse import DEFAULT_METHOD, params_for
+from altfuse.fuse import DEFAULT_METHOD, method, params_for
 from altfuse.params import fields
-from altfuse.pipeline import FuseOptions, FuseRun, fuse_log, prepare_log, progress, run_method
+from altfuse.pipeline import (
+    FuseOptions,
+    FuseRun,
+    fuse_log,
+    fusion_input,
+    prepare_log,
+    progress,
+    run_method,
+)
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.write import (
     STDOUT,
@@ -88,7 +96,12 @@ def fuse_to_files(
     """
     options = options or FuseOptions()
     prepared = prepare_log(path, options)
-    run = run_method(prepared, options)
+    inputs = None
+    if outputs.evaluation is None:  # no other method to run: the raw IMU and attitude go
+        inputs = fusion_input(prepared, method(options.method), options.method)
+        prepared = prepared.without_inertial()
+    run = run_method(prepared, options, inputs)
+    del inputs
     extra: dict[Path, tuple[Writer, bool]] = {}
     evaluation = None
     if outputs.evaluation is not None:
