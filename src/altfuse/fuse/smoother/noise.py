@@ -44,6 +44,14 @@ MAX_SPEED_M_S = 100.0
 #: The spans [s] over which two sensors' agreement is measured, and the least share of the
 #: default random walks it may leave (a floor: two simulated sensors can agree exactly).
 AGREEMENT_LAGS_S = (2.0, 5.0, 10.0, 20.0, 40.0)
+#: ... and the blocks [s] the difference is also averaged over first, AGREEMENT_BLOCK_LAGS
+#: blocks apart: a noisy sensor's white noise, 2 sigma^2 in every increment of single samples,
+#: hid how little it wanders from another (a barometer 0.11 m noisy: no bound under 6e-4 m^2/s;
+#: its blocks' means, 2e-5).
+AGREEMENT_BLOCKS_S = (2.0, 5.0, 10.0)
+AGREEMENT_BLOCK_LAGS = (1, 2, 4)
+#: Fewest increments a bound is measured from.
+AGREEMENT_MIN_INCREMENTS = 20
 Q_AGREEMENT_MIN_SHARE = 1e-2
 #: An accelerometer sample departing from its neighbours' median (over SPIKE_WINDOW_S, at
 #: least SPIKE_MIN_SAMPLES) by more than SPIKE_SIGMAS of the flight's such departures is a spike
@@ -235,17 +243,33 @@ def terrain_noise(d: FloatArray, flown: FloatArray, lag: int, noise_m2: float) -
 def wander_bound(d: FloatArray, dt: float) -> float:
     """An upper bound [m^2/s] on the random-walk density of ``d`` on a clock of step ``dt``:
     ``Var(d(t + L) - d(t)) = q L + 2 sigma^2 >= q L``, so ``q <= Var_L / L`` at every span
-    ``L`` of AGREEMENT_LAGS_S (each variance robust, from the MAD); the least of them. Noise
-    only loosens it: beyond its sampling error it never claims that two sensors agree better
-    than they do. NaN when the difference is too short."""
-    bounds = []
-    for lag in AGREEMENT_LAGS_S:
-        k = max(1, round(lag / dt))
-        inc = d[k:] - d[:-k] if d.size > k else np.zeros(0)
-        inc = inc[np.isfinite(inc)]
-        if inc.size >= 20:
-            bounds.append(mad_sigma(inc) ** 2 / (k * dt))
-    return min(bounds) if bounds else math.nan
+    ``L`` of AGREEMENT_LAGS_S; and of the means of ``d`` over blocks of ``W``
+    (AGREEMENT_BLOCKS_S) ``k W`` apart (AGREEMENT_BLOCK_LAGS), whose increments' variance is
+    ``q W (k - 1/3) + 2 sigma^2 / N``, the noise averaged over the block's ``N`` samples (each
+    variance robust, from the MAD); the least of them. Noise only loosens it: beyond its
+    sampling error it never claims that two sensors agree better than they do. NaN when the
+    difference is too short."""
+    lags = [max(1, round(lag / dt)) for lag in AGREEMENT_LAGS_S]
+    bounds = [_bound(d, k, k * dt) for k in lags]
+    for width_s in AGREEMENT_BLOCKS_S:
+        width = max(1, round(width_s / dt))
+        blocks = d[: d.size // width * width].reshape(-1, width)
+        finite = np.isfinite(blocks).sum(axis=1)
+        # a block's mean where at least half of it is there
+        means = np.where(
+            finite >= width / 2, np.nansum(blocks, axis=1) / np.maximum(finite, 1), np.nan
+        )
+        bounds += [_bound(means, k, width * dt * (k - 1 / 3)) for k in AGREEMENT_BLOCK_LAGS]
+    found = [b for b in bounds if math.isfinite(b)]
+    return min(found) if found else math.nan
+
+
+def _bound(d: FloatArray, k: int, span_s: float) -> float:
+    """``Var(d(i + k) - d(i)) / span_s`` (robust: from the MAD), NaN with fewer than
+    AGREEMENT_MIN_INCREMENTS finite increments."""
+    inc = d[k:] - d[:-k] if d.size > k else np.zeros(0)
+    inc = inc[np.isfinite(inc)]
+    return mad_sigma(inc) ** 2 / span_s if inc.size >= AGREEMENT_MIN_INCREMENTS else math.nan
 
 
 def bounded_by_agreement(
