@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter, rts_smoother
 
+from altfuse.fuse.smoother.events import TICK
+from altfuse.fuse.smoother.evidence import HEIGHTS
 from altfuse.fuse.smoother.model import (
     GPS_CORRELATION_S,
     RESET_DATUM,
@@ -36,7 +38,7 @@ from altfuse.fuse.smoother.model import (
     reset_states,
     transition,
 )
-from altfuse.fuse.smoother.passes import likelihood, likelihoods, run
+from altfuse.fuse.smoother.passes import FOR_EM, FOR_RESULT, Keep, likelihood, likelihoods, run
 
 M = 2  # sensors: a GPS (its offset bounded) and a barometer, the barometer with a drift rate
 
@@ -238,3 +240,34 @@ def test_passes_run_at_once_give_the_passes_run_one_by_one() -> None:
         assert mine.keys() == theirs.keys()
         for key in mine:
             np.testing.assert_array_equal(mine[key], theirs[key])
+
+
+@pytest.mark.parametrize("keep", [FOR_EM, FOR_RESULT, HEIGHTS], ids=["em", "result", "heights"])
+def test_a_pass_keeps_what_it_is_asked_for_as_a_whole_one(keep: Keep) -> None:
+    # the smoother's passes keep less than everything (the states at the ticks, a sample's row
+    # as H x): the same numbers as the pass that keeps everything, over blocks, with rejections
+    ev, layout, r = toy(4, accel=True, spliced=True, count=3000)
+    ev = replace(ev, gate=1.5)
+    whole = run(ev, r, layout, block=256)
+    ours = run(ev, r, layout, block=256, keep=keep)
+    at = ev.who == TICK if keep.ticks else np.ones(ev.who.size, dtype=bool)
+    states = list(range(layout.n)) if keep.states is None else list(keep.states)
+    assert ours["x"].shape == (at.sum(), len(states))
+    np.testing.assert_array_equal(ours["x"], whole["x"][at][:, states])
+    np.testing.assert_array_equal(ours["accepted"], whole["accepted"])
+    assert set(ours) == {"x", "accepted", *keep.verdicts} | ({"var_h"} if keep.var_h else set()) | (
+        {"hx", "var_row"} if keep.rows else set()
+    )
+    for name in keep.verdicts:
+        np.testing.assert_array_equal(ours[name], whole[name])
+    if keep.var_h:
+        np.testing.assert_array_equal(ours["var_h"], whole["var_h"][at])
+    if keep.rows:
+        np.testing.assert_array_equal(ours["var_row"], whole["var_row"])
+        rows = measurement_rows(layout, ev.who)
+        h = np.zeros((ev.who.size, layout.n))
+        for k, series in enumerate(ev.who):
+            measurement_row(rows, int(series), k, h[k])
+        expected = np.where(ev.who != TICK, np.einsum("ki,ki->k", h, whole["x"]), np.nan)
+        np.testing.assert_allclose(ours["hx"], expected, rtol=0, atol=1e-12)
+        assert np.isnan(ours["hx"][ev.who == TICK]).all()

@@ -227,7 +227,7 @@ from altfuse.fuse.smoother.noise import (
     offset_noise,
     state_noise,
 )
-from altfuse.fuse.smoother.passes import run
+from altfuse.fuse.smoother.passes import FOR_EM, FOR_RESULT, run
 from altfuse.fuse.smoother.velocity import VELOCITY_NAME, checked_velocity, lag_regressor
 from altfuse.memory import release_free_memory
 from altfuse.model import FloatArray, Samples
@@ -368,8 +368,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     floor = ev.q_accel
     ev, out = _smoothed(ev, layout, noise, floor if params.accel_noise_m2_s3 is None else None)
 
-    tick = who == -1
-    xs, var_h, gain_h = out["x"][tick], out["var_h"][tick], out["gain_h"]
+    xs, var_h, gain_h = out["x"], out["var_h"], out["gain_h"]  # the states at the ticks
     series = [*enumerate(names)] + ([(VELOCITY, VELOCITY_NAME)] if velocity is not None else [])
     nis, rejected = _innovation_checks(out, who, series)
     del out  # the events' states, before the result's arrays
@@ -424,17 +423,19 @@ def _smoothed(
     acceleration noise, never below ``floor`` (None: a density the user gave, kept), refined
     by ``EM_PASSES`` M-steps, each followed by a pass; the events as refined, and the last
     pass."""
-    out = run(ev, noise.r(ev.who), layout)
+    keep = FOR_EM if EM_PASSES else FOR_RESULT
+    out = run(ev, noise.r(ev.who), layout, keep=keep)
     for k in range(EM_PASSES):
         progress.info("smoother: noise pass %d of %d (%d events)", k + 1, EM_PASSES, ev.t.size)
-        em_scale(ev, layout, noise, out)
+        em_scale(ev, noise, out)
         states = {"x": out["x"]}
         del out  # but its states, before em_accel's arrays
         if floor is not None:
             ev = em_accel(ev, states, floor)
         del states  # before the next pass's
         release_free_memory()
-        out = run(ev, noise.r(ev.who), layout)
+        keep = FOR_RESULT if k == EM_PASSES - 1 else FOR_EM
+        out = run(ev, noise.r(ev.who), layout, keep=keep)
     return ev, out
 
 

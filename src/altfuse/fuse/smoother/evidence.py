@@ -17,13 +17,16 @@ from altfuse.fuse.smoother.model import (
     scales_agree,
     scales_to_learn,
 )
-from altfuse.fuse.smoother.passes import likelihood, likelihoods, run
+from altfuse.fuse.smoother.passes import Keep, likelihood, likelihoods, run
 from altfuse.model import FloatArray
 
 #: Log-likelihood gain that adds the drift rates: half the chi-square (1 dof) 0.1 % point. A
 #: drift rate absorbs a warming as readily as a drift; at a Bayes factor of 20 (a gain of 3) it
 #: was taken on a simulated climb that does not drift and took its warming (0.297 -> 0.400 m).
 DRIFT_GAIN = 10.83 / 2
+#: What the scale's test keeps of the pass without the scale: the height (the scale's regressor)
+#: and the samples' log-likelihoods.
+HEIGHTS = Keep(states=(0,), var_h=False, rows=False, verdicts=frozenset(("loglik",)))
 #: Log-likelihood gain that adds the temperature coefficients: a Bayes factor of 20, "strong"
 #: evidence (Kass and Raftery 1995). The filter's likelihood integrates the coefficient over its
 #: prior, so it already pays for the extra state; the chi-square point on top of that left a
@@ -104,7 +107,7 @@ def scale_evidence(
     """
     if not scales_to_learn(unknown):
         return layout, math.nan
-    without = run(physical, r, layout)
+    without = run(physical, r, layout, keep=HEIGHTS)
     richer = layout.adding(scale_regressors(physical.who, without["x"][:, 0], unknown))
     verdict = likelihood(physical, r, richer)
     gain = evidence_gain(without, verdict)

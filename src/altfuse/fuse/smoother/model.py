@@ -402,22 +402,6 @@ def measurement_row(rows: Rows, series: int, k: int, out: FloatArray) -> None:
             out[regs[j, 0]] = coef[j, k]
 
 
-def measured(rows: Rows, who: np.ndarray, x: FloatArray, events: np.ndarray) -> FloatArray:
-    """``H x`` at the ``events`` (indices) of the states ``x`` (every event's), one state at a
-    time: the rows of a flight's samples as one array cost 29 MB on a 7.4-hour log."""
-    base, regs, coef = rows
-    series = who[events]
-    out = np.zeros(events.size)
-    for state in range(base.shape[1]):
-        weight = base[series + 2, state]
-        on = weight != 0.0
-        out[on] += weight[on] * x[events[on], state]
-    for j in range(regs.shape[0]):
-        on = series == regs[j, 1]
-        out[on] += coef[j, events[on]] * x[events[on], regs[j, 0]]
-    return out
-
-
 @compiled
 def hold_still(x: FloatArray, p: FloatArray, record: FloatArray, at_datum: bool) -> None:
     """Standing on the ground, in place: v = 0, and at the datum (``at_datum``: before take-off)

@@ -13,7 +13,7 @@ import numpy as np
 
 from altfuse.fuse.base import FusionInput
 from altfuse.fuse.smoother.events import VELOCITY, interval_mean
-from altfuse.fuse.smoother.model import Events, Layout, measured, measurement_rows
+from altfuse.fuse.smoother.model import Events
 from altfuse.metrics import (
     MAD_TO_SIGMA,
     hold_nearest,
@@ -419,16 +419,15 @@ def em_accel(ev: Events, out: dict[str, np.ndarray], floor: FloatArray) -> Event
     return replace(ev, q_accel=np.maximum(floor, ACCEL_EM_GAIN * density[window]))
 
 
-def em_scale(ev: Events, layout: Layout, noise: Noise, out: dict[str, np.ndarray]) -> None:
-    """EM, M-step: each series' noise scale from the smoothed residuals (in place)."""
-    xs = out["x"]
-    rows = measurement_rows(layout, ev.who)
-    m = layout.sign.size
+def em_scale(ev: Events, noise: Noise, out: dict[str, np.ndarray]) -> None:
+    """EM, M-step: each series' noise scale from the smoothed residuals (in place): ``out``'s
+    rows (each sample's smoothed ``H x`` and its variance) and verdicts."""
+    m = noise.scale.size - 1
     for i, entry in [*((i, i) for i in range(m)), (VELOCITY, m)]:
         mine = np.flatnonzero((ev.who == i) & out["accepted"])
         if noise.fixed[entry] or not mine.size:
             continue
-        resid = ev.z[mine] - measured(rows, ev.who, xs, mine)
+        resid = ev.z[mine] - out["hx"][mine]
         ratio = (resid**2 + out["var_row"][mine]) / noise.base[mine]
         ratio = ratio[np.isfinite(ratio)]  # a state the filter lost (damaged stamps) says nothing
         if ratio.size:

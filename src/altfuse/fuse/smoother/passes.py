@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -58,32 +59,71 @@ AGREED_LOCKOUT_S = 0.5
 BLOCK = 16384
 
 
+@dataclass(frozen=True)
+class Keep:
+    """What a pass keeps of each event, each array 6 MB on a 7.4-hour log's 791,616 events
+    (the passes' peak, kept whole): ``states``, the smoothed states kept (their indices; None:
+    all), at every event or, with ``ticks``, at the clock's ticks only; ``var_h``, the
+    variance of h there; ``rows``, each sample's smoothed ``H x`` (``hx``) and its variance
+    (``var_row``), NaN at a tick; and of the forward filter's verdicts, which samples it
+    accepted (always) and those named in ``verdicts``: each one's gain on h (``gain_h``), its
+    log-likelihood (``loglik``) and its normalised innovation (``nu``)."""
+
+    states: tuple[int, ...] | None = None
+    ticks: bool = False
+    var_h: bool = True
+    rows: bool = True
+    verdicts: frozenset[str] = frozenset(("gain_h", "loglik", "nu"))
+
+    def judged(self) -> tuple[bool, bool, bool]:
+        """Whether the forward filter keeps each sample's gain, log-likelihood, innovation."""
+        return "gain_h" in self.verdicts, "loglik" in self.verdicts, "nu" in self.verdicts
+
+
+#: Everything (the tests'); what an EM pass needs (h, v and the accelerometer's bias, each
+#: sample's row); and the last pass (the result: the states and h's variance at the ticks, the
+#: gains, the innovations).
+EVERYTHING = Keep()
+FOR_EM = Keep(states=(0, 1, 2), var_h=False, verdicts=frozenset())
+FOR_RESULT = Keep(ticks=True, rows=False, verdicts=frozenset(("gain_h", "nu")))
+
+
 def run(
-    ev: Events, r: FloatArray, layout: Layout, smooth: bool = True, block: int = BLOCK
+    ev: Events,
+    r: FloatArray,
+    layout: Layout,
+    smooth: bool = True,
+    block: int = BLOCK,
+    keep: Keep = EVERYTHING,
 ) -> dict[str, np.ndarray]:
     """Forward filter and (if ``smooth``) the backward pass over the events: the states (``x``),
-    the variance of ``h`` (``var_h``) and of each sample's own measurement row ``H x``
-    (``var_row``, NaN at a tick), smoothed (or filtered), and diagnostics.
+    the variance of ``h`` (``var_h``), each sample's own measurement row ``H x`` (``hx``) and its
+    variance (``var_row``, NaN at a tick), smoothed (or filtered), and diagnostics, as much of
+    them as ``keep`` says.
 
     ``r`` is each event's measurement variance. Also each accepted sample's log-likelihood (its
     innovation's density; NaN elsewhere): the evidence by which :func:`evidence_gain` compares two
     models. ``block``: the events between two checkpoints of the forward filter (:func:`_backward`).
     """
     model = _model(ev, r, layout)
-    _, checkpoints, verdicts, kept = _forward(model, block, True)
-    x, var_h, var_row = _backward(model, (checkpoints, kept), verdicts, (block, smooth))
-    gain_h, accepted, loglik, nu = verdicts
-    return {
-        "x": x, "var_h": var_h, "var_row": var_row, "gain_h": gain_h, "accepted": accepted,
-        "loglik": loglik, "nu": nu,
-    }  # fmt: skip
+    _, checkpoints, verdicts, kept = _forward(model, block, True, keep.judged())
+    states = np.arange(layout.n) if keep.states is None else np.array(keep.states)
+    smoothed = _backward(model, (checkpoints, kept), verdicts, (block, smooth), (states, keep))
+    x, var_h, hx, var_row = smoothed
+    out = {"x": x, "accepted": verdicts[1]}
+    if keep.var_h:
+        out["var_h"] = var_h
+    if keep.rows:
+        out.update(hx=hx, var_row=var_row)
+    judged = {"gain_h": verdicts[0], "loglik": verdicts[2], "nu": verdicts[3]}
+    return out | {name: judged[name] for name in sorted(keep.verdicts)}
 
 
 def likelihood(ev: Events, r: FloatArray, layout: Layout) -> dict[str, np.ndarray]:
     """The forward filter's verdicts alone: which samples it accepted and their log-likelihood,
     and its state after the last event (``last``: a constant state's estimate from the whole
     flight); :func:`run` without the backward pass."""
-    last, _, verdicts, _ = _forward(_model(ev, r, layout), BLOCK, False)
+    last, _, verdicts, _ = _forward(_model(ev, r, layout), BLOCK, False, (False, True, False))
     return {"accepted": verdicts[1], "loglik": verdicts[2], "last": last}
 
 
@@ -168,15 +208,15 @@ Model = tuple[
 
 @compiled
 def _forward(
-    model: Model, block: int, keep: bool
+    model: Model, block: int, keep: bool, judged: tuple[bool, bool, bool]
 ) -> tuple[FloatArray, Checkpoints, Verdicts, tuple[Buffers, int]]:
     """The forward filter over every event (:func:`_filter`): its state after the last, its
     whole state before every ``block``-th event (the backward pass runs it again from there),
-    per sample its gain on h, whether it passed the gate, its log-likelihood and its
-    normalised innovation ``y / sqrt(S)``; and two buffers for the backward pass to filter a
-    block again into (:func:`_refilter`), of a block's size with ``keep`` (else of one event),
-    the last block's records already in its own (a flight of one block is filtered once), and
-    how many of its events were held on the ground.
+    per sample whether it passed the gate and, where ``judged`` says (else empty), its gain on
+    h, its log-likelihood and its normalised innovation ``y / sqrt(S)``; and two buffers for the
+    backward pass to filter a block again into (:func:`_refilter`), of a block's size with
+    ``keep`` (else of one event), the last block's records already in its own (a flight of one
+    block is filtered once), and how many of its events were held on the ground.
 
     ``model``: the events' times, series (:mod:`.events`), values, variances and rows of H;
     their dynamics: the mean acceleration over the interval ending at each event, the white
@@ -194,8 +234,8 @@ def _forward(
         np.zeros((blocks, n)), np.zeros((blocks, n, 2)), np.zeros((blocks, 3)),
     )  # fmt: skip
     verdicts = (
-        np.zeros(count), np.zeros(count, dtype=np.bool_), np.full(count, np.nan),
-        np.full(count, np.nan),
+        np.zeros(count if judged[0] else 0), np.zeros(count, dtype=np.bool_),
+        np.full(count if judged[1] else 0, np.nan), np.full(count if judged[2] else 0, np.nan),
     )  # fmt: skip
     size = min(count, block) if keep else 1  # else only a hold's scratch
     buffers = (_kept(size, n, size), _kept(size, n, size))
@@ -299,19 +339,22 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
                 if _release(3 + i, y, (seen, refused), p):
                     y, s = innovation(x, p, z[k], hk, r[k], ph)
                 refused[3 + i, 0], refused[3 + i, 1] = t[k], math.copysign(1.0, y)
-            nu[k] = y / math.sqrt(s)
+            if nu.size:
+                nu[k] = y / math.sqrt(s)
         # the innovation gate: |y| <= gate sqrt(S)
         if i != TICK and y * y <= gate * gate * s:
             if keep:
                 updates[slot, :n] = ph
                 updates[slot, n], updates[slot, n + 1] = s, y
-            gain_h[k] = abs(update(x, p, y, s, ph))
+            gain = update(x, p, y, s, ph)
+            if gain_h.size:
+                gain_h[k] = abs(gain)
             accepted[k] = True
             if i >= 0:  # a height: the lockout's clocks
                 last_accepted = sensor_accepted[3 + i] = t[k]
                 sensor_r[3 + i] = r[k]
-            # log N(y; 0, S)
-            loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
+            if loglik.size:  # log N(y; 0, S)
+                loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
         if still[k] or landed[k]:
             hold_still(x, p, holds[held - first_held if keep else 0], still[k])
             held += 1
@@ -416,9 +459,11 @@ def _backward(
     forward: tuple[Checkpoints, tuple[Buffers, int]],
     verdicts: Verdicts,
     passes: tuple[int, bool],
-) -> tuple[FloatArray, FloatArray, FloatArray]:
+    kept_of: tuple[np.ndarray, Keep],
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """The smoothed (or, without ``smooth``, the filtered) states at every event, the variance
-    of ``h`` and of each sample's own row ``H x`` (NaN at a tick): back over the blocks of
+    of ``h``, and each sample's own row ``H x`` and its variance (NaN at a tick), as much of
+    them as ``kept_of`` says (the states' indices, and :class:`Keep`): back over the blocks of
     :func:`_forward`, last first, each one filtered again from its checkpoint (the same steps
     on the same numbers: the same result) and then gone back through (:func:`_back`).
 
@@ -435,7 +480,14 @@ def _backward(
     count, n = t.size, model[4][0].size
     blocks = checkpoints[0].shape[0]
     events = (t, who, rows, still | landed, model[4][2:4])
-    smoothed = (np.zeros((count, n)), np.zeros(count), np.full(count, np.nan))
+    states, keep = kept_of
+    kept = int(np.count_nonzero(who == TICK)) if keep.ticks else count
+    smoothed = (
+        np.zeros((kept, states.size)), np.zeros(kept if keep.var_h else 0),
+        np.full(count if keep.rows else 0, np.nan), np.full(count if keep.rows else 0, np.nan),
+    )  # fmt: skip
+    # with ticks, the row of the next tick back (the backward pass goes from the last)
+    at = (states, keep.ticks, np.array([kept]))
     adjoint = (np.zeros(n), np.zeros((n, n)))  # after the last event: nothing to come
 
     def refilter(b: int) -> tuple[tuple[int, int], Kept, int]:
@@ -449,10 +501,33 @@ def _backward(
     with ThreadPoolExecutor(1, thread_name_prefix="altfuse-pass") as pool:
         for b in range(blocks - 1, -1, -1):
             ahead = pool.submit(refilter, b - 1) if b else None
-            _back(events, filtered, dynamics, adjoint, (smoothed, smooth))
+            _back(events, filtered, dynamics, adjoint, (smoothed, smooth, at))
             if ahead is not None:
                 filtered = ahead.result()
     return smoothed
+
+
+@compiled
+def _kept_row(k: int, tick: bool, ticks: bool, cursor: np.ndarray) -> int:
+    """The row event ``k``'s smoothed state is kept in: its own, or with ``ticks`` the next
+    from the end (``cursor[0]``, counted down) at a tick and none (-1) elsewhere."""
+    if not ticks:
+        return k
+    if not tick:
+        return -1
+    cursor[0] -= 1
+    return int(cursor[0])
+
+
+@compiled
+def _row_value(h: FloatArray, x: FloatArray) -> float:
+    """``H x`` of a row ``h``, its entries in order, those that are 0 left out (a lost state's
+    NaN stays out, as in the row of a sensor it is not)."""
+    value = 0.0
+    for i in range(h.size):
+        if h[i] != 0.0:
+            value += h[i] * x[i]
+    return value
 
 
 @compiled
@@ -478,12 +553,19 @@ def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x
     filtered: tuple[tuple[int, int], Kept, int],
     dynamics: tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray],
     adjoint: tuple[FloatArray, FloatArray],
-    out: tuple[tuple[FloatArray, FloatArray, FloatArray], bool],
+    out: tuple[
+        tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+        bool,
+        tuple[np.ndarray, bool, np.ndarray],
+    ],
 ) -> None:
     """The modified Bryson-Frazier pass (:mod:`.kalman`) back over one block of filtered
     events, into ``out``'s states and variances; the adjoint (``lambda``, ``Lambda``) carried
     in from the events after the block and out to those before it, in place. Without
-    ``out[1]`` (smooth) the adjoint stays 0: the filtered states and variances.
+    ``out[1]`` (smooth) the adjoint stays 0: the filtered states and variances. ``out[2]``:
+    the states kept, whether at the ticks only (each a row of ``out[0][0]`` and of h's
+    variances, the last first from ``cursor[0]``, counted down, else every event's), and
+    ``cursor``; an empty output array is not written.
 
     ``events``: the events' times, series, rows of H, which were held on the ground, and per
     event the row of the states that returned to the prior there, and those rows;
@@ -492,29 +574,38 @@ def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x
     smoothed ones."""
     t, who, rows, held_at, resets = events
     span, (xf, pf, updates, holds), held = filtered
-    (xs, var_h, var_row), smooth = out
+    (xs, var_h, hx, var_row), smooth, (states, ticks, cursor) = out
     _, _, _, structure, links = dynamics
     n = xf.shape[1]
     fl: Transition = (np.eye(n), links, structure[2])
     work = scratch(n)
     p = np.zeros((n, n))  # each event's filtered covariance, unpacked
     hk = np.zeros(n)  # and its row of H
+    xk = np.zeros(n)  # and its smoothed state
     lam = adjoint[0]
     unit = np.zeros((2, n))
     unit[0, 0] = unit[1, 1] = 1.0
     for k in range(span[1] - 1, span[0] - 1, -1):
         slot = k - span[0]
         unpack(pf[slot], p)
+        row = _kept_row(k, who[k] == TICK, ticks, cursor)
         # smoothed at k: x_s = x - P lambda;  var = H P H' - (P H')' Lambda (P H')
-        var_h[k] = smoothed_variance(p, adjoint[1], unit[0], work)
+        if row >= 0 and var_h.size:
+            var_h[row] = smoothed_variance(p, adjoint[1], unit[0], work)
         if who[k] != TICK:
             measurement_row(rows, who[k], k, hk)
-            var_row[k] = smoothed_variance(p, adjoint[1], hk, work)
+            if var_row.size:
+                var_row[k] = smoothed_variance(p, adjoint[1], hk, work)
         for i in range(n):
             total = 0.0
             for j in range(n):
                 total += p[i, j] * lam[j]
-            xs[k, i] = xf[slot, i] - total
+            xk[i] = xf[slot, i] - total
+        if row >= 0:
+            for c in range(states.size):
+                xs[row, c] = xk[states[c]]
+        if hx.size and who[k] != TICK:
+            hx[k] = _row_value(hk, xk)
         if not smooth:
             continue
         # back through the event's updates, last first: its holds, then its sample
