@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from altfuse.errors import UnsupportedLogError
 from altfuse.fuse import method
+from altfuse.info import damage
+from altfuse.io import read_log
+from altfuse.job import Outputs, fuse_to_files
 from altfuse.pipeline import FuseOptions, fuse_log, fusion_input, prepare_log, run_method
+from altfuse.screen import screen
 from conftest import SAMPLE_LOG, shared_log
 
 
@@ -48,3 +54,19 @@ def test_a_run_without_the_raw_inertial_records_is_the_same() -> None:
     theirs = run_method(prepared, options).result
     np.testing.assert_array_equal(ours.fused, theirs.fused)
     np.testing.assert_array_equal(ours.tick_traces["fused_std"], theirs.tick_traces["fused_std"])
+
+
+def test_a_fused_run_written_keeps_only_its_sensors_of_the_log(tmp_path: Path) -> None:
+    """fuse_to_files lets the log's other samples go before writing (the 300 MB log's peak was
+    there): what the commands read afterwards stays (notes, damage, the sensors' counts)."""
+    done = fuse_to_files(SAMPLE_LOG, Outputs(csv=tmp_path / "o.csv"))
+    log = done.run.log
+    full = read_log(SAMPLE_LOG)
+    assert full.references
+    assert full.imu is not None
+    assert log.references == ()
+    assert log.imu is None
+    assert log.vibration is None
+    assert log.temperatures == {}
+    assert damage(log) == damage(screen(full))
+    assert [s.name for s in log.sensors] == [s.name for s in screen(full).sensors]

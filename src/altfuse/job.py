@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from altfuse.evaluation import Evaluation, evaluate_prepared, truth_or_none
 from altfuse.fuse import DEFAULT_METHOD, method, params_for
+from altfuse.memory import release_free_memory
 from altfuse.params import fields
 from altfuse.pipeline import (
     FuseOptions,
@@ -74,8 +75,10 @@ class Outputs:
 
 @dataclass(frozen=True)
 class FileRun:
-    """A run written to files: the run, its evaluation (when asked for) and the files by
-    role (``csv``, ``meta``, ``weights``, ``png``/``svg``, ``json``)."""
+    """A run written to files: the run (its log without the samples beside the altitude
+    sources where nothing drew or evaluated it: :meth:`FlightLog.sensors_only`), its evaluation
+    (when asked for) and the files by role (``csv``, ``meta``, ``weights``, ``png``/``svg``,
+    ``json``)."""
 
     run: FuseRun
     evaluation: Evaluation | None
@@ -112,6 +115,10 @@ def fuse_to_files(
         title = f"{label or Path(path).name}: {options.method}"
         fig = run_figure(run, {options.method: run.result.fused}, truth, title)
         extra[outputs.plot] = (writer(fig, outputs.plot), True)
+    if outputs.evaluation is None and outputs.plot is None:
+        run = replace(run, log=run.log.sensors_only())  # nothing reads the rest again
+    del prepared
+    release_free_memory()  # what the method freed, before the writers (pyarrow: 25 MB itself)
     started = time.perf_counter()
     progress.info("writing %s", outputs.csv.name)
     written = write_outputs(run, outputs.csv, outputs.weights, outputs.meta, extra)

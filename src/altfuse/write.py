@@ -67,6 +67,10 @@ def column_unit(name: str) -> str:
     return "1"
 
 
+#: Rows of a CSV formatted at a time.
+CSV_ROWS = 1 << 16
+
+
 def write_table(table: Columns, fmt: TableFormat, metadata: dict[str, Any]) -> Writer:
     """A binary writer of ``table``: Parquet (each column's unit in its metadata, ``metadata``
     as JSON in the file's key-value metadata under ``altfuse``), or CSV (see
@@ -77,8 +81,9 @@ def write_table(table: Columns, fmt: TableFormat, metadata: dict[str, Any]) -> W
 
     columns = {name: np.asarray(values) for name, values in table.items()}
 
-    def arrow(rounded: bool) -> Any:
+    def arrow(rounded: bool, rows: slice = slice(None)) -> Any:
         def column(values: np.ndarray) -> Any:
+            values = values[rows]
             if rounded and values.dtype.kind == "f":
                 # + 0.0: no "-0" where a small negative value rounds to zero
                 values = np.round(values, CSV_DECIMALS) + 0.0
@@ -106,7 +111,14 @@ def write_table(table: Columns, fmt: TableFormat, metadata: dict[str, Any]) -> W
         # unquoted, as pandas writes them (Arrow quotes every name); none needs quotes
         handle.write((",".join(columns) + "\n").encode())
         options = pacsv.WriteOptions(include_header=False, quoting_style="none")
-        pacsv.write_csv(arrow(rounded=True), handle, options)
+        count = len(next(iter(columns.values()))) if columns else 0
+        # rounded CSV_ROWS rows at a time: a copy of the whole table was the write's peak
+        chunks = [slice(start, start + CSV_ROWS) for start in range(0, count, CSV_ROWS)]
+        first = arrow(rounded=True, rows=chunks[0] if chunks else slice(None))
+        with pacsv.CSVWriter(handle, first.schema, write_options=options) as out:
+            out.write_table(first)
+            for rows in chunks[1:]:
+                out.write_table(arrow(rounded=True, rows=rows))
 
     return write
 
