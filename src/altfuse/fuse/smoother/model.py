@@ -315,9 +315,9 @@ class Events:
     ``who``: the sensor of a sample, -1 for a tick; ``z``: the sample's value; ``a``: the mean
     vertical acceleration over the interval ending at the event, ``q_accel`` the white
     acceleration noise density there [m^2/s^3] (the flight's, and what spikes and the sensors'
-    refusals add); ``q_state`` (events, m): the
-    sensor states' random-walk densities over that interval; ``still``: the events at which the
-    vehicle is known to stand at the take-off point; ``h0``: the first height guess;
+    refusals add); ``q_state`` (events, m): the sensor states' random-walk densities over that
+    interval (one row: the same at every event); ``still``: the events at which the vehicle is
+    known to stand at the take-off point; ``h0``: the first height guess;
     ``landed``: the events at which it stands still elsewhere on the ground, none of
     ``still`` (v = 0 alone; None: none); ``reset``: the first event of each segment of a
     spliced log, the row of :func:`reset_states` that returns to the prior there (0 elsewhere;

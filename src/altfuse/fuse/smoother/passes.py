@@ -318,7 +318,7 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
             # the accelerometer as the control input: B u = [a dt^2 / 2, a dt, 0, ...]
             u[0], u[1] = 0.5 * a[k] * dt * dt, a[k] * dt
             transition(fl[0], dt, structure)
-            process_noise(q, dt, q_accel[k], q_state[k], structure)
+            process_noise(q, dt, q_accel[k], q_state[min(k, q_state.shape[0] - 1)], structure)
             predict(x, p, fl, q, u, work)
         if reset[k] > 0:
             # a splice: part of the state returns to the prior (h and v in every row), h at
