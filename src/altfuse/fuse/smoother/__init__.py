@@ -177,8 +177,8 @@ used here: each step carries one scalar measurement of any sensor, or none (a cl
 gated, and the gains per sensor are needed for the contributions. Cost is linear in the
 number of events: 5 us an event over all its passes on a 1-hour flight with its 400 Hz IMU
 and the GPS's velocity (``benchmarks/smoother_bench.py``; 12 us with Rauch-Tung-Striebel's
-O(n^3) gain), 2.7x ``support``'s time on a 300 MB log end to end (7.8 s against 2.9 s; 3.3x
-before the compiled passes), 418 MiB against 376 MiB, 1.45x the log (the backward pass filters
+O(n^3) gain), 2.7x ``support``'s time on a 300 MB log end to end (7.9 s against 3.0 s; 3.3x
+before the compiled passes), 406 MiB against 377 MiB, 1.41x the log (the backward pass filters
 each block of ``passes.BLOCK`` events again from a checkpoint, and each pass keeps only what its
 caller reads, :class:`.passes.Keep`: 822 MiB when every event's covariance was kept).
 """
