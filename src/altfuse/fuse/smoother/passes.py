@@ -86,6 +86,8 @@ class Keep:
 EVERYTHING = Keep()
 FOR_EM = Keep(states=(0, 1, 2), var_h=False, verdicts=frozenset())
 FOR_RESULT = Keep(ticks=True, rows=False, verdicts=frozenset(("gain_h", "nu")))
+#: The verdicts of a forward pass alone (:func:`likelihood`).
+LIKELIHOOD = Keep(verdicts=frozenset(("loglik",)))
 
 
 def run(
@@ -123,7 +125,7 @@ def likelihood(ev: Events, r: FloatArray, layout: Layout) -> dict[str, np.ndarra
     """The forward filter's verdicts alone: which samples it accepted and their log-likelihood,
     and its state after the last event (``last``: a constant state's estimate from the whole
     flight); :func:`run` without the backward pass."""
-    last, _, verdicts, _ = _forward(_model(ev, r, layout), BLOCK, False, (False, True, False))
+    last, _, verdicts, _ = _forward(_model(ev, r, layout), BLOCK, False, LIKELIHOOD.judged())
     return {"accepted": verdicts[1], "loglik": verdicts[2], "last": last}
 
 
