@@ -553,7 +553,7 @@ def test_the_acceleration_noise_is_raised_where_the_smoothed_flight_departs_from
     who = np.full(t.size, -1)
     ev = Events(t, who, np.zeros(t.size), np.full(t.size, 0.5), np.zeros((t.size, 0)),
                 np.zeros(t.size, bool), floor, True, 3.5, 0.0)  # fmt: skip
-    raised = em_accel(ev, {"x": x}, floor).q_accel
+    raised = em_accel(ev, x, floor).q_accel
     third = (t >= 2.0 - 1e-9) & (t < 3.0 - 1e-9)
     np.testing.assert_allclose(raised[third], ACCEL_EM_GAIN * 1.0**2 / 1.0, rtol=1e-9)
     np.testing.assert_array_equal(raised[~third], floor[~third])

@@ -428,7 +428,7 @@ def _smoothed(
     for k in range(EM_PASSES):
         progress.info("smoother: noise pass %d of %d (%d events)", k + 1, EM_PASSES, ev.t.size)
         em_scale(ev, noise, out)
-        states = {"x": out["x"]}
+        states = out["x"]
         del out  # but its states, before em_accel's arrays
         if floor is not None:
             ev = em_accel(ev, states, floor)

@@ -402,17 +402,17 @@ def measurement_noise(
     return Noise(base, np.ones(len(inputs.samples) + 1), fixed, floor)
 
 
-def em_accel(ev: Events, out: dict[str, np.ndarray], floor: FloatArray) -> Events:
+def em_accel(ev: Events, x: FloatArray, floor: FloatArray) -> Events:
     """EM, M-step for the white acceleration noise, per window of ``ACCEL_EM_WINDOW_S``: the
     events with each window's density ``q = ACCEL_EM_GAIN sum(w^2) / sum(dt)``, where the
-    smoothed flight ``out`` needs it, never below ``floor`` (the log's own, with its spikes and
-    the sensors' refusals). ``w = v(k) - v(k-1) - (a_k - b) dt``: the velocity's change the
-    sensors asked for beyond the accelerometer's. An accelerometer wrong for seconds (an
+    smoothed flight needs it (``x``: its states h, v and b at every event), never below
+    ``floor`` (the log's own, with its spikes and the sensors' refusals).
+    ``w = v(k) - v(k-1) - (a_k - b) dt``: the velocity's change the sensors asked for beyond
+    the accelerometer's. An accelerometer wrong for seconds (an
     attitude error turning gravity into the vertical) shows here where its own sample spread
     says nothing: on the 3.3 plane 0.143 -> 0.116 m RMSE, maximum 0.85 -> 0.67 m."""
     if not ev.use_bias:  # no accelerometer: its random walk is all the model has
         return ev
-    x = out["x"]
     dt = np.diff(ev.t, prepend=ev.t[0])
     w = np.zeros(ev.t.size)
     # v(k) = v(k-1) + (a_k - b) dt + w_k  (the transition of model.transition with the input)

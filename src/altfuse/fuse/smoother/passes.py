@@ -241,13 +241,12 @@ def _forward(
     )  # fmt: skip
     size = min(count, block) if keep else 1  # else only a hold's scratch
     buffers = (_kept(size, n, size), _kept(size, n, size))
-    first_held = 0
+    held = 0
     for b in range(blocks):
         _save(carry, checkpoints, b)
         span = (b * block, min((b + 1) * block, count))
-        first_held = int(carry[5][2])
-        _filter(model, span, carry, (buffers[b % 2], keep and b == blocks - 1), verdicts)
-    return carry[0], checkpoints, verdicts, (buffers, int(carry[5][2]) - first_held)
+        held = _held(model, span, carry, (buffers[b % 2], keep and b == blocks - 1), verdicts)
+    return carry[0], checkpoints, verdicts, (buffers, held)
 
 
 @compiled
@@ -494,8 +493,8 @@ def _backward(
 
     def refilter(b: int) -> tuple[tuple[int, int], Kept, int]:
         span = (b * block, min((b + 1) * block, count))
-        kept = buffers[b % 2]
-        return span, kept, _refilter(model, (checkpoints, b), verdicts, span, kept)
+        buffer = buffers[b % 2]
+        return span, buffer, _refilter(model, (checkpoints, b), verdicts, span, buffer)
 
     # the last block as the forward pass kept it
     span = ((blocks - 1) * block, count)
@@ -543,9 +542,16 @@ def _refilter(
     """The events of ``span`` filtered again from their block's checkpoint (``checkpoint``:
     the checkpoints and the block's), what the backward pass needs of them into ``kept``;
     how many were held on the ground."""
-    carry = _restored(*checkpoint)
+    return _held(model, span, _restored(*checkpoint), (kept, True), verdicts)
+
+
+@compiled
+def _held(
+    model: Model, span: tuple[int, int], carry: Carry, kept: tuple[Kept, bool], verdicts: Verdicts
+) -> int:
+    """:func:`_filter` over ``span``; how many of its events were held on the ground."""
     first_held = int(carry[5][2])
-    _filter(model, span, carry, (kept, True), verdicts)
+    _filter(model, span, carry, kept, verdicts)
     return int(carry[5][2]) - first_held
 
 
