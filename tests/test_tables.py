@@ -15,6 +15,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+from altfuse import write
 from altfuse.batch import BatchOptions, run_batch
 from altfuse.write import CSV_DECIMALS, arrow_column, column_unit
 from conftest import SAMPLE_LOG, shared_log
@@ -189,3 +190,30 @@ def test_fuse_imports_neither_pandas_nor_scipy(tmp_path: Path) -> None:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.splitlines()[-1] == "loaded: ", done.stdout
     assert (tmp_path / "o.csv").exists()
+
+
+def test_a_csv_in_chunks_keeps_each_column_s_type(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The CSV is formatted CSV_ROWS rows at a time with one schema: a summary's column of
+    None in its first rows and numbers or text later (a metric or a note only of a later
+    log) writes as one column."""
+    monkeypatch.setattr(write, "CSV_ROWS", 2)
+    table = {
+        "log": np.array(["a", "b", "c", "d", "e"], dtype=object),
+        "reason": np.array([None, None, None, "no GPS", None], dtype=object),
+        "rmse_m": np.array([0.1234567, np.nan, 0.5, -1e-9, 2.0]),
+        "ticks": np.array([1, 2, 3, 4, 5]),
+        "flight_s": np.array([None, None, 12.5, None, 3], dtype=object),
+    }
+    out = tmp_path / "summary.csv"
+    with out.open("wb") as handle:
+        write.write_table(table, "csv", {})(handle)
+    assert out.read_text().splitlines() == [
+        "log,reason,rmse_m,ticks,flight_s",
+        "a,,0.123457,1,",
+        "b,,,2,",
+        "c,,0.5,3,12.5",
+        "d,no GPS,0,4,",
+        "e,,2,5,3",
+    ]
