@@ -1,5 +1,6 @@
-"""A long DataFlash log made from a real one: its data repeated with shifted times (the
-benchmarks' big logs, and the tests of what only hours of flight show)."""
+"""DataFlash logs made from real ones: a long one, its data repeated with shifted times (the
+benchmarks' big logs, and the tests of what only hours of flight show); one begun late, in
+flight (a log rotated or started mid-flight)."""
 
 from __future__ import annotations
 
@@ -42,3 +43,26 @@ def repeated_log(source: Path, target: Path, megabytes: float) -> int:
             body[where[:, None] + np.arange(8)] = shifted
             out.write(body.tobytes())
     return target.stat().st_size
+
+
+def begun_late(source: Path, target: Path, fraction: float) -> None:
+    """Write ``source`` without its data records before ``fraction`` of its time span (by
+    ``TimeUS``): the formats, units and parameters stay, every record from the first stamped
+    at or after that time is kept."""
+    index = index_file(source)
+    data = index.data
+    records = []  # (its bytes, its format's name, its TimeUS or -1)
+    for offset, type_id in zip(index.offsets.tolist(), index.types.tolist(), strict=True):
+        fmt = index.formats[type_id]
+        record = data[offset : offset + fmt.length]
+        timed = fmt.columns[:1] == ("TimeUS",) and fmt.format[:1] == "Q"
+        stamp = int(record[HEADER : HEADER + 8].view("<u8")[0]) if timed else -1
+        records.append((record, fmt.name, stamp))
+    stamps = np.array([stamp for _, _, stamp in records])
+    timed_stamps = stamps[stamps >= 0]
+    cut = timed_stamps.min() + fraction * (timed_stamps.max() - timed_stamps.min())
+    first = int(np.flatnonzero(stamps >= cut)[0])
+    with target.open("wb") as out:
+        for k, (record, name, _) in enumerate(records):
+            if k >= first or name in ONCE:
+                out.write(record.tobytes())

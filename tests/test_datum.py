@@ -118,6 +118,38 @@ def test_rangefinder_tilt_correction() -> None:
     assert "not tilt-corrected" in tilt_correct(rfnd, None).datum
 
 
+def test_every_offset_is_measured_at_the_reference_s_instants() -> None:
+    """A vehicle creeping up at 8 cm/s before take-off, its barometer (the reference) silent
+    for 6 s of the ground window: the GPS's median over all its ticks there was 0.148 m from
+    the barometer's over its own last 1.2 s."""
+    t = np.arange(0.0, 40.0, 0.1)
+    h = np.where(t < 12, 0.08 * t, 0.08 * 12 + 2.0 * (t - 12))
+    baro = 3.0 + h
+    baro[(t >= 4) & (t < 10)] = np.nan
+    names = ("gps", "baro")
+    z = np.column_stack([500 + h, baro])
+    ref = refer_to_takeoff(Aligned(t, names, names, z, 10.0, 1.0, "union", {}))
+    assert ref.reference == "baro"
+    assert ref.on_real_ground
+    assert {o.window_s for o in ref.offsets} == {ref.ground_window_s}
+    both = np.isfinite(baro)
+    np.testing.assert_allclose(ref.h[both, 0], ref.h[both, 1], atol=1e-9)
+
+
+def test_a_log_begun_in_a_climb_has_no_ground() -> None:
+    """Its first seconds rise 1 m or more: no ground window (the take-off a climb's continuation
+    would suggest), the log's first seconds."""
+    t = np.arange(0.0, 60.0, 0.1)
+    h = 20.0 + np.minimum(2.4 * t, 100.0)
+    names = ("gps", "baro")
+    z = np.column_stack([500 + h, 3.0 + h])
+    ref = refer_to_takeoff(Aligned(t, names, names, z, 10.0, 1.0, "union", {}))
+    assert not ref.on_real_ground
+    assert ref.on_ground_s is None
+    assert all("moving before take-off was found" in o.method for o in ref.offsets)
+    np.testing.assert_allclose(ref.h[:, 0], ref.h[:, 1], atol=1e-9)
+
+
 def scaled_flight(
     scale: float, climb_m: float, drift_m_per_min: float = 0.0, seed: int = 4
 ) -> tuple[Aligned, np.ndarray]:

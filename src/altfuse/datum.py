@@ -257,6 +257,13 @@ def detect_takeoff(
     return float(t[above[0]]) if above.size else None
 
 
+def _moving(h: FloatArray, window: npt.NDArray[np.bool_], rate_hz: float, climb_m: float) -> bool:
+    """Whether ``h`` (1 s running median, as :func:`detect_takeoff` smooths it) changes by
+    ``climb_m`` or more over the ticks of ``window``: the vehicle did not stand there."""
+    smooth = running_median(h, max(1, round(rate_hz)))[window]
+    return bool(smooth.size) and float(np.nanmax(smooth) - np.nanmin(smooth)) >= climb_m
+
+
 def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what the log tells)
     aligned: Aligned,
     ground_window_s: float = 5.0,
@@ -378,6 +385,10 @@ def _refer_segment(
         real = bool((window & ref_valid).any())
         if not real:
             ground_how = "first seconds of the log (no reference sample before take-off)"
+        elif _moving(z[:, ref], window & ref_valid, aligned.rate_hz, climb_m):
+            # a log begun in flight: its first seconds are a climb, not a ground
+            real, window = False, np.zeros(t.size, dtype=bool)
+            ground_how = "first seconds of the log (moving before take-off was found)"
     if not (window & ref_valid).any():
         window = _first_seconds(ref_valid, t, ground_s)
     win_idx = np.flatnonzero(window & ref_valid)
@@ -429,7 +440,9 @@ def _refer(
     for i in order:
         name, valid = aligned.names[i], np.isfinite(z[:, i])
         scale = scales[i].scale if i in scales and scales[i].applied else 1.0
-        on_ground = ground.window & valid
+        # at the reference's own instants in the window: where it moves (a log begun in a
+        # climb), a tick more or less of one sensor is a different height
+        on_ground = ground.window & valid & np.isfinite(z[:, ref])
         why = "no valid reading on the ground"
         if aligned.kinds[i] == "rangefinder" and on_ground.any() and i != ref:
             share = on_ground.sum() / max(int(ground.window.sum()), 1)
