@@ -187,9 +187,10 @@ class Referred:
     @property
     def on_ground_s(self) -> tuple[float, float] | None:
         """The span in which the vehicle stood still at the take-off point: the ground window
-        up to ``STILL_MARGIN_S`` before a detected take-off; None if it is empty or there was no
-        take-off."""
-        if self.takeoff_s is None:
+        up to ``STILL_MARGIN_S`` before a detected take-off; None if it is empty, or there was
+        no take-off or no ground before it (a log begun in flight: held at 0 there, a climb
+        took the smoother 3.4 m off every sensor for the whole flight)."""
+        if self.takeoff_s is None or not self.on_real_ground:
             return None
         lo, hi = self.ground_window_s
         hi = min(hi, self.takeoff_s - STILL_MARGIN_S)
