@@ -47,16 +47,20 @@ def repeated_log(source: Path, target: Path, megabytes: float) -> int:
 
 def begun_late(source: Path, target: Path, fraction: float) -> None:
     """Write ``source`` without its data records before ``fraction`` of its time span (by
-    ``TimeUS``): the formats, units and parameters stay, every record from the first stamped
-    at or after that time is kept."""
+    ``TimeUS``, or an older log's ``TimeMS``, but GPS's: the GPS time of week there): the
+    formats, units and parameters stay, every record from the first stamped at or after that
+    time is kept."""
     index = index_file(source)
     data = index.data
     records = []  # (its bytes, its format's name, its TimeUS or -1)
     for offset, type_id in zip(index.offsets.tolist(), index.types.tolist(), strict=True):
         fmt = index.formats[type_id]
         record = data[offset : offset + fmt.length]
-        timed = fmt.columns[:1] == ("TimeUS",) and fmt.format[:1] == "Q"
-        stamp = int(record[HEADER : HEADER + 8].view("<u8")[0]) if timed else -1
+        stamp = -1
+        if fmt.columns[:1] == ("TimeUS",) and fmt.format[:1] == "Q":
+            stamp = int(record[HEADER : HEADER + 8].view("<u8")[0])
+        elif fmt.columns[:1] == ("TimeMS",) and fmt.format[:1] == "I" and fmt.name != "GPS":
+            stamp = 1000 * int(record[HEADER : HEADER + 4].view("<u4")[0])
         records.append((record, fmt.name, stamp))
     stamps = np.array([stamp for _, _, stamp in records])
     timed_stamps = stamps[stamps >= 0]
