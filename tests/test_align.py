@@ -164,3 +164,27 @@ def test_a_sensor_logged_slower_than_the_gap_is_not_cut_between_its_samples() ->
     assert np.isnan(out[pause]).all()
     assert np.isfinite(out[~pause]).all()
     assert stats.gaps_over_max == 1
+
+
+def test_a_lags_standard_error_describes_its_error() -> None:
+    """Over 40 noises of the same climb, the barometer 0.3 m noisy: the lag's error lies within
+    2 standard errors on 85-100 % of them (white noise: the error's spread is 0.4 of the
+    standard error, which is made for the correlated errors of real sensors), and a quieter
+    barometer gives a smaller one."""
+    tb, tg = np.arange(0.0, 120.0, 0.1), np.arange(0.0, 120.0, 0.2) + 0.013
+
+    def estimated(seed: int, noise_m: float) -> tuple[float, float]:
+        rng = np.random.default_rng(seed)
+        baro = series("baro", tb, climb_profile(tb) + rng.normal(0, noise_m, tb.size))
+        gps = series("gps", tg, climb_profile(tg - 0.2) + rng.normal(0, 0.05, tg.size), "gps")
+        lag = estimate_lag(gps, baro)
+        assert lag.std_s is not None
+        assert f"+-{lag.std_s:.3f} s" in lag.how
+        return lag.lag_s - 0.2, lag.std_s
+
+    noisy = np.array([estimated(seed, 0.3) for seed in range(40)])
+    z = np.abs(noisy[:, 0]) / noisy[:, 1]
+    assert 0.85 <= np.mean(z <= 2.0) <= 1.0
+    assert 0.25 * np.median(noisy[:, 1]) < np.std(noisy[:, 0]) < np.median(noisy[:, 1])
+    quiet = np.array([estimated(seed, 0.03) for seed in range(5)])
+    assert np.median(quiet[:, 1]) < 0.6 * np.median(noisy[:, 1])  # the GPS is 0.05 m noisy
