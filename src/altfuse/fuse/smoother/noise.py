@@ -44,8 +44,8 @@ MAX_SPEED_M_S = 100.0
 #: The spans [s] over which two sensors' agreement is measured, and the least share of the
 #: default random walks it may leave (a floor: two simulated sensors can agree exactly; at
 #: 1e-3 three long truth logs' bands come into the 0.90-0.99 window and two short ones' fall
-#: below it, 0.847 and 0.895, in their climbs: their sensors lag SIM.Alt by 9-12 ms, the long
-#: ones' by 3-8, which the offsets' band had covered).
+#: below it, 0.847 and 0.895, in their climbs: lagging SIM.Alt 8-9 ms there, as the long
+#: ones do 2-8 ms, which the offsets' wider band over a long flight covers).
 AGREEMENT_LAGS_S = (2.0, 5.0, 10.0, 20.0, 40.0)
 #: ... and the blocks [s] the difference is also averaged over first, AGREEMENT_BLOCK_LAGS
 #: blocks apart: a noisy sensor's white noise, 2 sigma^2 in every increment of single samples,
