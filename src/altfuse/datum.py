@@ -443,10 +443,11 @@ def _refer(
         scale = scales[i].scale if i in scales and scales[i].applied else 1.0
         # at the reference's own instants in the window: where it moves (a log begun in a
         # climb), a tick more or less of one sensor is a different height
-        on_ground = ground.window & valid & np.isfinite(z[:, ref])
+        at_ref = ground.window & np.isfinite(z[:, ref])
+        on_ground = at_ref & valid
         why = "no valid reading on the ground"
         if aligned.kinds[i] == "rangefinder" and on_ground.any() and i != ref:
-            share = on_ground.sum() / max(int(ground.window.sum()), 1)
+            share = on_ground.sum() / max(int(at_ref.sum()), 1)
             if share < RANGEFINDER_GROUND_SHARE:  # the tail of readings below its minimum
                 on_ground = np.zeros_like(on_ground)
                 why = f"valid on {share:.0%} of the ground window: below its minimum there"
