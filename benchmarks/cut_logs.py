@@ -1,6 +1,6 @@
 """The default method on the truth logs cut as real logs are: ended early (a crash, a flat
 battery: the file's first part) and begun late (a log rotated or started in flight: its data
-from a point of its span on, ``tests/repeated.py``'s ``begun_late``).
+from a point of its span on: ``tests/repeated.py``'s ``cut_log``).
 
 Run on demand:  python benchmarks/cut_logs.py [--shared ../shared/logs] [--jobs 2]
 [--ended 0.2 0.3 0.4 0.5 0.75] [--begun 0.2 0.4 0.6]
@@ -27,7 +27,7 @@ from accuracy import verdict  # noqa: E402
 from altfuse.errors import AltfuseError  # noqa: E402
 from altfuse.evaluation import evaluate  # noqa: E402
 from altfuse.pipeline import FuseOptions  # noqa: E402
-from repeated import begun_late  # noqa: E402
+from repeated import cut_log  # noqa: E402
 
 
 def measure(job: tuple[Path, str, float]) -> tuple[str, list[str]]:
@@ -36,11 +36,7 @@ def measure(job: tuple[Path, str, float]) -> tuple[str, list[str]]:
     label = f"{path.stem[:34]:34s} {how} {fraction:.2f}"
     with tempfile.TemporaryDirectory() as tmp:
         cut = Path(tmp) / path.name
-        if how == "ended":
-            data = path.read_bytes()
-            cut.write_bytes(data[: int(len(data) * fraction)])
-        else:
-            begun_late(path, cut, fraction)
+        cut_log(path, cut, how, fraction)
         try:
             result = evaluate(cut, ["smoother"], FuseOptions(), truth="sim")
         except AltfuseError as exc:

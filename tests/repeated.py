@@ -1,6 +1,6 @@
 """DataFlash logs made from real ones: a long one, its data repeated with shifted times (the
-benchmarks' big logs, and the tests of what only hours of flight show); one begun late, in
-flight (a log rotated or started mid-flight)."""
+benchmarks' big logs, and the tests of what only hours of flight show); one cut as real logs
+are, ended early or begun late (:func:`cut_log`)."""
 
 from __future__ import annotations
 
@@ -70,3 +70,16 @@ def begun_late(source: Path, target: Path, fraction: float) -> None:
         for k, (record, name, _) in enumerate(records):
             if k >= first or name in ONCE:
                 out.write(record.tobytes())
+
+
+def cut_log(source: Path, target: Path, how: str, fraction: float) -> None:
+    """Write ``source`` cut as a real log is: ``ended`` at ``fraction`` of its bytes (a crash, a
+    flat battery), or ``begun`` at ``fraction`` of its span (:func:`begun_late`: a log rotated or
+    started in flight)."""
+    if how == "ended":
+        data = source.read_bytes()
+        target.write_bytes(data[: int(len(data) * fraction)])
+    elif how == "begun":
+        begun_late(source, target, fraction)
+    else:
+        raise ValueError(f"a log is cut 'ended' or 'begun', not {how!r}")

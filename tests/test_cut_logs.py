@@ -13,7 +13,7 @@ import pytest
 from accuracy import verdict
 from altfuse.evaluation import evaluate
 from conftest import SHARED_LOGS, shared_log
-from repeated import begun_late
+from repeated import cut_log
 
 TRUTH = sorted(p.name for p in (SHARED_LOGS / "truth").glob("*.BIN"))
 QUADPLANE = "quadplane_4.6.0dev_yakupabaci_climb65m.BIN"
@@ -42,11 +42,7 @@ CUTS = [
 def test_a_cut_truth_log_is_fused_within_the_bar(how: str, name: str, tmp_path: Path) -> None:
     source = shared_log(f"truth/{name}")
     cut = tmp_path / name
-    if how == "ended":
-        data = source.read_bytes()
-        cut.write_bytes(data[: int(len(data) * 0.3)])
-    else:
-        begun_late(source, cut, 0.4)
+    cut_log(source, cut, how, 0.3 if how == "ended" else 0.4)
     fails = verdict(evaluate(cut, ["smoother"]), "smoother")["fails"]
     assert isinstance(fails, list)
     assert not {"rmse", "max"} & set(fails), fails

@@ -19,7 +19,7 @@ from altfuse.fuse.smoother import SmootherParams
 from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, fuse_log, fusion_input, prepare_log, run_method
 from conftest import SHARED_LOGS, shared_log
-from repeated import begun_late
+from repeated import cut_log
 
 TRUTH = sorted(p.name for p in (SHARED_LOGS / "truth").glob("*.BIN"))
 OLD_CLOCK = [
@@ -178,9 +178,8 @@ def test_a_log_that_ends_a_few_seconds_after_take_off_gets_its_barometer_scale(
     check on the heights' changes asked for 8 spans of 2 s and found none (not estimated): the
     smoother followed the barometer, 0.49 m above GPS and rangefinder, with a band of 4 mm.
     Spans of down to 1 s: 1.051 +- 0.006, applied."""
-    data = shared_log("truth/copter_3.7dev_maikbasso_sonar_10m.BIN").read_bytes()
     cut = tmp_path / "cut.BIN"
-    cut.write_bytes(data[: int(len(data) * 0.3)])
+    cut_log(shared_log("truth/copter_3.7dev_maikbasso_sonar_10m.BIN"), cut, "ended", 0.3)
     result = evaluate(cut, ["smoother"])
     baro = next(o for o in result.prepared.referred.offsets if o.name == "baro")
     assert baro.scale == pytest.approx(1.05, abs=0.01)
@@ -197,7 +196,7 @@ def test_a_log_begun_in_a_climb_is_referred_at_one_instant(tmp_path: Path) -> No
     apart, and the smoother 0.249 m RMS off (the barometer 0.009). Now no ground (the height
     rose 4.5 m in that window) and every offset at the reference's instants."""
     late = tmp_path / "late.BIN"
-    begun_late(shared_log(CLIMB_305), late, 0.4)
+    cut_log(shared_log(CLIMB_305), late, "begun", 0.4)
     result = evaluate(late, ["smoother"])
     referred = result.prepared.referred
     assert not referred.on_real_ground
@@ -214,7 +213,7 @@ def test_a_log_begun_in_flight_is_not_held_on_a_ground(tmp_path: Path) -> None:
     (the first seconds' median, 3.4 m higher): every offset took -3.4 m and the smoother flew
     3.37 m above all three sensors for the whole log (flagged diverged, but no estimate)."""
     late = tmp_path / "late.BIN"
-    begun_late(shared_log("truth/copter_3.7dev_maikbasso_sonar_10m.BIN"), late, 0.2)
+    cut_log(shared_log("truth/copter_3.7dev_maikbasso_sonar_10m.BIN"), late, "begun", 0.2)
     result = evaluate(late, ["smoother"])
     assert result.prepared.referred.on_ground_s is None
     rows = {r.name: r.overall for r in result.rows}

@@ -243,26 +243,31 @@ def _first_seconds(
     return out
 
 
+def _smoothed(h: FloatArray, rate_hz: float) -> FloatArray:
+    """``h`` on a clock of ``rate_hz`` as the take-off is looked for in it: its 1 s running
+    median."""
+    return running_median(h, max(1, round(rate_hz)))
+
+
 def detect_takeoff(
-    t: FloatArray, h: FloatArray, rate_hz: float, ground_s: float, climb_m: float
+    t: FloatArray, h: FloatArray, smooth: FloatArray, ground_s: float, climb_m: float
 ) -> float | None:
-    """First time [s] at which ``h`` (1 s running median) rises ``climb_m`` above its start."""
+    """First time [s] at which ``h`` (``smooth``: :func:`_smoothed`) rises ``climb_m`` above its
+    start."""
     valid = np.isfinite(h)
     start = _first_seconds(valid, t, ground_s)
     if not start.any():
         return None
     ground = float(np.median(h[start]))
-    window = max(1, round(rate_hz))
-    smooth = running_median(h, window)
     above = np.flatnonzero(valid & (smooth > ground + climb_m))
     return float(t[above[0]]) if above.size else None
 
 
-def _moving(h: FloatArray, window: npt.NDArray[np.bool_], rate_hz: float, climb_m: float) -> bool:
-    """Whether ``h`` (1 s running median, as :func:`detect_takeoff` smooths it) changes by
-    ``climb_m`` or more over the ticks of ``window``: the vehicle did not stand there."""
-    smooth = running_median(h, max(1, round(rate_hz)))[window]
-    return bool(smooth.size) and float(np.nanmax(smooth) - np.nanmin(smooth)) >= climb_m
+def _moving(smooth: FloatArray, window: npt.NDArray[np.bool_], climb_m: float) -> bool:
+    """Whether a height (``smooth``: :func:`_smoothed`) changes by ``climb_m`` or more over the
+    ticks of ``window``: the vehicle did not stand there."""
+    there = smooth[window]
+    return bool(there.size) and float(np.nanmax(there) - np.nanmin(there)) >= climb_m
 
 
 def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what the log tells)
@@ -372,7 +377,8 @@ def _refer_segment(
     t, z = aligned.t, aligned.z
     ref = choose_reference(aligned)
     ref_valid = np.isfinite(z[:, ref])
-    takeoff = detect_takeoff(t, z[:, ref], aligned.rate_hz, ground_s, climb_m)
+    smooth = _smoothed(z[:, ref], aligned.rate_hz)
+    takeoff = detect_takeoff(t, z[:, ref], smooth, ground_s, climb_m)
     window = np.zeros(t.size, dtype=bool)
     real = False
     if takeoff is None:
@@ -386,7 +392,7 @@ def _refer_segment(
         real = bool((window & ref_valid).any())
         if not real:
             ground_how = "first seconds of the log (no reference sample before take-off)"
-        elif _moving(z[:, ref], window & ref_valid, aligned.rate_hz, climb_m):
+        elif _moving(smooth, window & ref_valid, climb_m):
             # a log begun in flight: its first seconds are a climb, not a ground
             real, window = False, np.zeros(t.size, dtype=bool)
             ground_how = "first seconds of the log (moving before take-off was found)"
