@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
-from accuracy import verdict
+from accuracy import coverage, verdict
 from altfuse.cli import cli
 from altfuse.evaluation import evaluate
 from altfuse.fuse import FusionInput
@@ -25,6 +25,7 @@ from altfuse.fuse.smoother.compiled import _forget_other_versions
 from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record
 from altfuse.fuse.smoother.model import (
     GPS_CORRELATION_S,
+    LEARN_SCALE_STD,
     OFFSET_PRIOR,
     STILL_SIGMA,
     Events,
@@ -210,6 +211,30 @@ def test_a_barometer_scale_the_datum_cannot_tell_is_learnt_where_the_log_asks(
     else:
         assert params["baro_scale"].startswith("not modelled")  # a gain of -2.2
         assert "scale_error_baro" not in params
+
+
+def test_a_scale_the_datum_applied_loosely_is_relearnt_by_the_smoother(tmp_path: Path) -> None:
+    """The hover climbs 240 m with its barometer 7 % high: the datum, against the GPS alone,
+    applies 1.074 +- 0.013, and at 240 m its error is a metre: the smoother followed it, 0.483 m
+    RMSE, +-2 sigma coverage 0.17. Above LEARN_SCALE_STD the smoother relearns the scale from
+    the barometer's own readings, with the accelerometer: 0.04 m; the other methods keep the
+    datum's scale."""
+    log = tmp_path / "hover.bin"
+    write_simulated_log(simulate_flight("hover", 0, faults=("baro-scale",)), log)
+    result = evaluate(log, ["support", "smoother"], truth="sim")
+    baro = {o.name: o for o in result.prepared.referred.offsets}["baro"]
+    assert baro.scale_applied
+    assert baro.scale_std is not None
+    assert baro.scale_std > LEARN_SCALE_STD
+    params = result.runs["smoother"].result.params
+    assert params["baro_scale"] == "modelled"
+    assert params["scale_error_baro"] == pytest.approx(0.07, abs=0.01)
+    rmse = {r.name: r.overall.rmse for r in result.rows}
+    assert rmse["smoother"] < 0.1  # 0.040
+    assert rmse["support"] < 1.0  # 0.505: the datum's scale, applied
+    fused = result.runs["smoother"].result
+    error = fused.fused - result.truth.h
+    assert coverage(error, fused.tick_traces["fused_std"]) > 0.9  # 0.998
 
 
 def test_a_log_resumed_in_flight_is_fused_from_where_its_sensors_say_the_vehicle_is(

@@ -76,13 +76,15 @@ SCALE_MIN_SIGMAS = 2.0
 SCALE_RANGE = (0.8, 1.25)
 #: A GPS's error wanders (a random walk of metres over minutes): its heights' errors are
 #: correlated over a flight, so the fit on the heights counts one independent sample per
-#: SCALE_BLOCK_S [s], and the fit on the heights' changes over successive spans (the flight's
-#: length over SCALE_CHANGES, within SCALE_SPAN_S [s]), whose errors are nearly independent,
-#: must agree: the scale's standard error is the larger of the two. Spans down to 1 s: a log
-#: that ends 12 s after take-off (a simulator's 10 m flight cut short, its barometer 5 % high)
-#: had no 8 spans of 2 s, its scale was not estimated and the smoother followed the barometer
-#: 0.49 m off (now 1.051 +- 0.006, applied: 0.004 m RMSE); every log 32 s or longer keeps its
-#: spans.
+#: SCALE_BLOCK_S [s] (its residuals' variance, not the drift's prior, raised by the samples per
+#: block: raising the whole error made a 20 s climb of 50 m, whose scale and drift the prior
+#: alone tells apart, 1.053 +- 0.061 where the changes say +- 0.012), and the fit on the heights'
+#: changes over successive spans (the flight's length over SCALE_CHANGES, within SCALE_SPAN_S
+#: [s]), whose errors are nearly independent, must agree: the scale's standard error is the
+#: larger of the two. Spans down to 1 s: a log that ends 12 s after take-off (a simulator's 10 m
+#: flight cut short, its barometer 5 % high) had no 8 spans of 2 s, its scale was not estimated
+#: and the smoother followed the barometer 0.49 m off (now 1.051 +- 0.006, applied: 0.004 m
+#: RMSE); every log 32 s or longer keeps its spans.
 SCALE_BLOCK_S = 10.0
 SCALE_CHANGES = 16
 SCALE_SPAN_S = (1.0, 10.0)
@@ -120,6 +122,14 @@ class Offset:
         if self.scale_applied or self.scale_estimate is None or self.scale_std is None:
             return None
         return self.scale_estimate, self.scale_std
+
+    @property
+    def scale_known(self) -> tuple[float, float] | None:
+        """A barometer whose scale was applied: that scale and its standard error; None
+        otherwise."""
+        if not self.scale_applied or self.scale_std is None:
+            return None
+        return self.scale, self.scale_std
 
 
 @dataclass(frozen=True)
@@ -519,7 +529,14 @@ def _scale(t: FloatArray, x: FloatArray, y: FloatArray, reference: str) -> Scale
                      False)  # fmt: skip
     minutes = (t - t[both][0]) / 60.0
     levels = np.column_stack([x, minutes, np.ones(t.size)])
-    fit = _robust_fit(levels[both], y[both], [math.inf, DRIFT_PRIOR_M_PER_MIN, math.inf])
+    # the GPS's wander correlates the residuals: one independent sample per SCALE_BLOCK_S
+    blocks = float(np.ptp(t[both])) / SCALE_BLOCK_S
+    fit = _robust_fit(
+        levels[both],
+        y[both],
+        [math.inf, DRIFT_PRIOR_M_PER_MIN, math.inf],
+        per_independent=both.sum() / max(blocks, 2.0),
+    )
     lo, hi = SCALE_SPAN_S
     span = min(max(float(np.ptp(t[both])) / SCALE_CHANGES, lo), hi)
     k = max(1, round(span / float(t[1] - t[0])))
@@ -532,8 +549,7 @@ def _scale(t: FloatArray, x: FloatArray, y: FloatArray, reference: str) -> Scale
     if fit is None or changes is None:
         return Scale(1.0, None, reference, "not estimated: no vertical range", False)
     scale = float(fit[0])
-    blocks = float(np.ptp(t[both])) / SCALE_BLOCK_S
-    std = max(fit[1] * math.sqrt(both.sum() / max(blocks, 2.0)), changes[1])
+    std = max(fit[1], changes[1])
     label = f"{scale:.4f} +- {std:.4f} against {reference}"
     if not std <= MAX_SCALE_STD:
         how = f"not applied: {label}: too little vertical range to tell"
@@ -547,12 +563,14 @@ def _scale(t: FloatArray, x: FloatArray, y: FloatArray, reference: str) -> Scale
 
 
 def _robust_fit(
-    design: FloatArray, y: FloatArray, prior: Sequence[float]
+    design: FloatArray, y: FloatArray, prior: Sequence[float], per_independent: float = 1.0
 ) -> tuple[float, float] | None:
     """The first coefficient of ``y ~ design`` by least squares, with a zero-mean normal prior
     of standard deviation ``prior[j]`` on coefficient ``j`` (``inf``: none), refitted twice
     without the residuals beyond 3 sigma (and ``SCALE_MIN_OUTLIER_M``), and its standard
-    error; None when too few rows are left or the design cannot tell the coefficient."""
+    error, the residuals' variance counted ``per_independent`` times (correlated residuals:
+    rows per independent one); None when too few rows are left or the design cannot tell the
+    coefficient."""
     keep = np.ones(y.size, dtype=bool)
     precision = np.diag(1.0 / np.asarray(prior, dtype=np.float64) ** 2)
     sigma = math.inf  # the first fit has no prior to weigh against
@@ -571,7 +589,7 @@ def _robust_fit(
     n, p = int(keep.sum()), design.shape[1]
     if n <= p + 1:
         return None
-    residual = max(float(np.sum(r[keep] ** 2)) / (n - p), 1e-12)
+    residual = max(float(np.sum(r[keep] ** 2)) / (n - p), 1e-12) * per_independent
     normal = design[keep].T @ design[keep] / residual + precision
     return float(coef[0]), math.sqrt(float(np.linalg.inv(normal)[0, 0]))
 

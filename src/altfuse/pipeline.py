@@ -249,6 +249,7 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         imu_rate_hz=imu_rate,
         datum_windows=referred.datum_windows,
         scale_unknown=tuple(o.scale_unknown for o in referred.offsets),
+        scale_known=tuple(o.scale_known for o in referred.offsets),
         landed=_samples(flight.landed),
     )
 

@@ -75,6 +75,9 @@ class FusionInput:
         Per sensor, in ``z``'s order: for a barometer whose scale the datum estimated and did not
         apply, that estimate and its standard error (:attr:`altfuse.datum.Offset.scale_unknown`);
         None otherwise.
+    scale_known
+        Per sensor, in ``z``'s order: for a barometer whose scale the datum applied, that scale
+        and its standard error (:attr:`altfuse.datum.Offset.scale_known`); None otherwise.
     """
 
     t: FloatArray
@@ -93,6 +96,7 @@ class FusionInput:
     imu_rate_hz: float | None = None
     datum_windows: tuple[tuple[float, float] | None, ...] = ()
     scale_unknown: tuple[tuple[float, float] | None, ...] = ()
+    scale_known: tuple[tuple[float, float] | None, ...] = ()
     landed: Samples | None = None
 
     def __post_init__(self) -> None:
@@ -102,16 +106,12 @@ class FusionInput:
         for what in ("names", "kinds", "samples"):
             if len(getattr(self, what)) != n:
                 raise ValueError(f"{len(getattr(self, what))} {what} for {n} sensors")
-        if not self.temperatures:
-            object.__setattr__(self, "temperatures", (None,) * n)
-        if not self.datum_windows:
-            object.__setattr__(self, "datum_windows", (None,) * n)
-        if len(self.datum_windows) != n:
-            raise ValueError(f"{len(self.datum_windows)} datum windows for {n} sensors")
-        if not self.scale_unknown:
-            object.__setattr__(self, "scale_unknown", (None,) * n)
-        if len(self.scale_unknown) != n:
-            raise ValueError(f"{len(self.scale_unknown)} scale flags for {n} sensors")
+        # per sensor, None for each where not given
+        for what in ("temperatures", "datum_windows", "scale_unknown", "scale_known"):
+            if not getattr(self, what):
+                object.__setattr__(self, what, (None,) * n)
+            if len(getattr(self, what)) != n:
+                raise ValueError(f"{len(getattr(self, what))} {what} for {n} sensors")
         if self.accel is not None and self.accel.on_clock.shape != self.t.shape:
             shape = self.accel.on_clock.shape
             raise ValueError(f"accel has shape {shape} for a clock of {self.t.size} ticks")
