@@ -360,8 +360,8 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     if params.offset_noise_m2_s:
         physical = replace(ev, q_state=state_noise(inputs, times, {})[0])
     plain = layout
-    scales = (inputs.scale_unknown, inputs.scale_known)
-    layout, scale_gain, ev, physical = relearnt_scales(ev, physical, r, layout, scales)
+    unknown, known = inputs.scale_unknown, inputs.scale_known
+    layout, scale_gain, ev, physical = relearnt_scales(ev, physical, r, layout, unknown, known)
     layout, thermal_gain, chosen = thermal_evidence(physical, r, layout)
     if chosen is None and layout is plain:
         chosen = tested  # the GPS test's pass of this very model, where it ran

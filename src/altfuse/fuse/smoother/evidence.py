@@ -185,29 +185,26 @@ def relearnt_scales(
     physical: Events,
     r: FloatArray,
     layout: Layout,
-    scales: tuple[Sequence[tuple[float, float] | None], Sequence[tuple[float, float] | None]],
+    unknown: Sequence[tuple[float, float] | None],
+    known: Sequence[tuple[float, float] | None],
 ) -> tuple[Layout, float, Events, Events]:
-    """:func:`scale_evidence`, where the datum applied a barometer's scale with a standard
-    error above LEARN_SCALE_STD (``scales``: per sensor the datum's unknown scales and its
-    applied ones) also on that barometer's readings referred by their offset only
-    (``z - c = scale h``): where the log's evidence learns its scale, the smoother takes it
-    and those readings (``ev`` and ``physical`` with them); elsewhere the datum's scale stays.
-    The datum sees the GPS alone, the smoother the accelerometer too: the datum's 1.074 +-
-    0.013 on altfuse's hovers whose barometer reads 7 % high left 0.48-0.71 m RMSE and +-2
-    sigma coverage 0.12-0.17 (see LEARN_SCALE_STD)."""
-    unknown, known = scales
+    """:func:`scale_evidence` on the scales the datum did not apply (``unknown``), and first,
+    where it applied one with a standard error above LEARN_SCALE_STD (``known``: per sensor the
+    scale applied and its error), also on that barometer's readings referred by their offset
+    only (``z - c = scale h``): where the log's evidence learns every such scale, the smoother
+    takes them and those readings (``ev`` and ``physical`` with them); elsewhere the datum's
+    scales stay. The datum sees the GPS alone, the smoother the accelerometer too: the datum's
+    1.074 +- 0.013 on altfuse's hovers whose barometer reads 7 % high left 0.48-0.71 m RMSE and
+    +-2 sigma coverage 0.12-0.17 (see LEARN_SCALE_STD)."""
     again = scales_to_relearn(known)
-    if not again:
-        found, gain = scale_evidence(physical, r, layout, unknown)
-        return found, gain, ev, physical
-    z = physical.z.copy()
-    for i, (scale, _) in again.items():
-        z[physical.who == i] *= scale
-    asked = [again.get(i, u) for i, u in enumerate(unknown)]
-    found, gain = scale_evidence(replace(physical, z=z), r, layout, asked)
-    learnt = {reg.sensor for reg in found.regressors if reg.name == "scale"} & again.keys()
-    if learnt != again.keys():  # the datum's scale stays: the test again without them
-        found, gain = scale_evidence(physical, r, layout, unknown)
-        return found, gain, ev, physical
-    raw = replace(ev, z=z)
-    return found, gain, raw, raw if physical is ev else replace(physical, z=z)
+    if again:
+        z = physical.z.copy()
+        for i, (scale, _) in again.items():
+            z[physical.who == i] *= scale
+        asked = [again.get(i, u) for i, u in enumerate(unknown)]
+        found, gain = scale_evidence(replace(physical, z=z), r, layout, asked)
+        if {reg.sensor for reg in found.regressors if reg.name == "scale"} >= again.keys():
+            raw = replace(ev, z=z)
+            return found, gain, raw, raw if physical is ev else replace(physical, z=z)
+    found, gain = scale_evidence(physical, r, layout, unknown)
+    return found, gain, ev, physical
