@@ -46,17 +46,24 @@ def test_a_cut_truth_log_is_fused_within_the_bar(how: str, name: str, tmp_path: 
     assert not {"rmse", "max"} & set(fails), fails
 
 
-def test_a_plane_log_ending_4_s_after_its_launch_does_not_follow_its_barometers(
-    tmp_path: Path,
+#: Short cuts that were silently wrong: the 4.5 plane's first 20 % (3 s on the ground, a 4 s
+#: launch to 17 m, both barometers 5 % high: the scale was not estimated on so short a log, and
+#: the smoother followed the barometers, 0.48 m RMSE, coverage 0.32), and the 10 m sonar
+#: flight's first 22 % (spliced: its second segment's own datum applied the barometer's 5 %,
+#: the smoother's samples kept the main segment's, 0.070 m against the barometer's 0.005).
+SHORT = [
+    ("plane_4.5.0dev_eozbademci_autotest_climb88m.BIN", 0.2),
+    ("copter_3.7dev_maikbasso_sonar_10m.BIN", 0.22),
+]
+
+
+@pytest.mark.parametrize(("name", "fraction"), SHORT)
+def test_a_log_ending_seconds_after_take_off_is_fused_within_the_bar(
+    name: str, fraction: float, tmp_path: Path
 ) -> None:
-    """The 4.5 plane's first 20 %: 3 s on the ground and a 4 s launch to 17 m, both barometers
-    5 % high. The scale was not estimated on so short a log, and the smoother followed the
-    barometers (0.48 m RMSE, +-2 sigma coverage 0.32: silently wrong)."""
-    source = shared_log("truth/plane_4.5.0dev_eozbademci_autotest_climb88m.BIN")
-    cut = tmp_path / "launch.bin"
-    cut_log(source, cut, "ended", 0.2)
+    cut = tmp_path / name
+    cut_log(shared_log(f"truth/{name}"), cut, "ended", fraction)
     result = verdict(evaluate(cut, ["smoother"]), "smoother")
-    assert result["best"] == "gps"
     fails = result["fails"]
     assert isinstance(fails, list)
     assert not {"rmse", "max", "ekf"} & set(fails), result

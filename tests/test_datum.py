@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from altfuse.align import Aligned
-from altfuse.datum import refer_to_takeoff
+from altfuse.datum import refer_to_takeoff, referred_samples
 from altfuse.fuse import FusionInput
 from altfuse.fuse.support import SupportParams, fuse_support
-from altfuse.model import Samples
+from altfuse.model import Samples, Series
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
 
@@ -284,6 +284,24 @@ def test_each_segment_of_a_spliced_log_with_a_take_off_gets_its_own_datum() -> N
     assert np.nanmax(np.abs(error)) < 0.3  # one datum: 3 m off after the reboot
     one = refer_to_takeoff(aligned)
     assert np.nanmax(np.abs(one.h[:, 1] - h)) > 2.5
+
+
+def test_a_segment_s_samples_are_referred_with_its_own_datum() -> None:
+    """The samples each sensor gives the smoother are the clock's heights at their times, in
+    every segment: the main segment's offsets gave the second flight's barometer, recalibrated
+    on its reboot, 3 m (and a scale its own datum applied: a fused height 0.25 m above both
+    sensors)."""
+    aligned, _ = two_flights(second_takes_off=True)
+    ref = refer_to_takeoff(aligned, splices=[110.0])
+    sensors = [
+        Series(name, name, name, "test", aligned.t[ok], aligned.z[ok, j])
+        for j, name in enumerate(aligned.names)
+        for ok in [np.isfinite(aligned.z[:, j])]
+    ]
+    for j, samples in enumerate(referred_samples(sensors, ref)):
+        on_clock = ref.h[np.searchsorted(ref.t, samples.t), j]
+        np.testing.assert_allclose(samples.value, on_clock, atol=1e-9)
+        assert (samples.t > 110).sum() > 500  # the second flight's samples are there
 
 
 def test_a_segment_resumed_in_flight_keeps_the_main_datum() -> None:

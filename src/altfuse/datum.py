@@ -173,6 +173,7 @@ class Segment:
     datum: str
     grounded: bool = True
     on_ground_s: tuple[float, float] | None = None
+    offsets: tuple[Offset, ...] = ()  # its own datum's; empty: the main segment's
 
 
 @dataclass(frozen=True)
@@ -319,6 +320,7 @@ def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what t
         part = aligned.part(a, b)
         own = None if (a, b) == main else _own_datum(part, *options, speed)
         grounded, still = True, None
+        offsets: tuple[Offset, ...] = ()
         if (a, b) == main:
             h[a:b], how, still = first.h, "the main segment's", first.on_ground_s
         elif own is not None:
@@ -326,14 +328,15 @@ def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what t
                 if name in own.names:
                     h[a:b, j] = own.h[:, own.names.index(name)]
             how = f"its own, ground before take-off at {own.takeoff_s:.1f} s"
-            still = own.on_ground_s
+            still, offsets = own.on_ground_s, own.offsets
         else:
             for j, o in enumerate(first.offsets):
                 h[a:b, j] = (part.z[:, columns[j]] - o.offset_m) / o.scale
             how, grounded = "the main segment's offsets (no take-off in it)", False
         ticks = t[a:b][valid[a:b]]
         if ticks.size:
-            segments.append(Segment(float(ticks[0]), float(ticks[-1]), how, grounded, still))
+            span = (float(ticks[0]), float(ticks[-1]))
+            segments.append(Segment(*span, how, grounded, still, offsets))
     return replace(first, t=t, h=h, segments=tuple(segments))
 
 
@@ -602,10 +605,27 @@ def _robust_fit(
 
 def referred_samples(sensors: Sequence[Series], referred: Referred) -> tuple[Samples, ...]:
     """Each referred sensor's own samples (time, height above take-off), duplicates merged, in
-    the clock's column order."""
+    the clock's column order; in a spliced log, a segment's samples as its ticks are, with its
+    own datum's offset and scale where it has one (none for a sensor that datum lacks). The
+    main segment's instead gave the smoother a barometer 5 % high in a segment whose own datum
+    applied its scale (a 10 m sonar flight's log cut short: the fused height 0.25 m above both
+    sensors in the table, band 8 mm)."""
     by_name = {s.name: s for s in sensors}
+    starts = [seg.start_s for seg in referred.segments]
     out = []
     for o in referred.offsets:
         s = by_name[o.name]
-        out.append(Samples(*merge_duplicates(s.t, (s.value - o.offset_m) / o.scale)))
+        value, keep = (s.value - o.offset_m) / o.scale, np.ones(s.t.size, dtype=bool)
+        for k, segment in enumerate(referred.segments):
+            if not segment.offsets:
+                continue  # the main segment's datum, as above
+            # from its first tick to the next segment's: where the smoother starts afresh
+            end = starts[k + 1] if k + 1 < len(starts) else math.inf
+            inside = (s.t >= (segment.start_s if k else -math.inf)) & (s.t < end)
+            own = {x.name: x for x in segment.offsets}.get(o.name)
+            if own is None:
+                keep &= ~inside
+            else:
+                value[inside] = (s.value[inside] - own.offset_m) / own.scale
+        out.append(Samples(*merge_duplicates(s.t[keep], value[keep])))
     return tuple(out)

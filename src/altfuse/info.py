@@ -10,7 +10,7 @@ import numpy as np
 
 from altfuse.errors import AltfuseError
 from altfuse.model import FlightLog, Series
-from altfuse.pipeline import FuseOptions, Prepared, prepare
+from altfuse.pipeline import FuseOptions, Prepared, prepare, segment_record
 from altfuse.screen import implausible_count, screen, screened_out
 
 #: A pause between two samples longer than this counts as a gap [s].
@@ -95,7 +95,7 @@ def describe_datum(prepared: Prepared) -> dict[str, Any]:
     referred = prepared.referred
     return {
         "takeoff_s": referred.takeoff_s,
-        "segments": [vars(s) for s in referred.segments],
+        "segments": [segment_record(s) for s in referred.segments],
         "sensors": [
             {
                 "name": o.name,

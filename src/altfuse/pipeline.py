@@ -13,7 +13,15 @@ import numpy as np
 
 from altfuse import __version__
 from altfuse.align import Aligned, Lag, Span, align, gps_lags, shift, splices
-from altfuse.datum import Referral, Referred, refer_to_takeoff, referred_samples, tilt_correct
+from altfuse.datum import (
+    Offset,
+    Referral,
+    Referred,
+    Segment,
+    refer_to_takeoff,
+    referred_samples,
+    tilt_correct,
+)
 from altfuse.errors import NoUsableSensorsError, ParameterError, Refusal, UnsupportedLogError
 from altfuse.fuse import DEFAULT_METHOD, METHODS, FusionInput, FusionResult, Method, method
 from altfuse.guard import guard
@@ -317,6 +325,26 @@ def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
     return run_method(prepare_log(path, options), options)
 
 
+def offset_record(o: Offset) -> dict[str, Any]:
+    """How a source was referred, for the provenance."""
+    return {
+        "sensor": o.name,
+        "offset_m": o.offset_m,
+        "method": o.method,
+        "window_s": list(o.window_s) if o.window_s else None,
+        "ticks": o.ticks,
+        "scale": o.scale,
+        "scale_std": o.scale_std,
+        "scale_method": o.scale_method,
+    }
+
+
+def segment_record(segment: Segment) -> dict[str, Any]:
+    """A segment of a spliced log, for the provenance: its span, datum and own offsets (none:
+    the main segment's)."""
+    return {**asdict(segment), "offsets": [offset_record(o) for o in segment.offsets]}
+
+
 def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
     """How the output was made: enough to reproduce it and to judge it."""
     flight, aligned, referred = prepared.log, prepared.aligned, prepared.referred
@@ -349,20 +377,8 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
             "reference": referred.reference,
             "takeoff_s": referred.takeoff_s,
             "ground_window_s": list(referred.ground_window_s),
-            "segments": [asdict(s) for s in referred.segments],
-            "offsets": [
-                {
-                    "sensor": o.name,
-                    "offset_m": o.offset_m,
-                    "method": o.method,
-                    "window_s": list(o.window_s) if o.window_s else None,
-                    "ticks": o.ticks,
-                    "scale": o.scale,
-                    "scale_std": o.scale_std,
-                    "scale_method": o.scale_method,
-                }
-                for o in referred.offsets
-            ],
+            "segments": [segment_record(s) for s in referred.segments],
+            "offsets": [offset_record(o) for o in referred.offsets],
         },
         "sensors_used": [
             {
