@@ -14,7 +14,7 @@ from altfuse.cli import cli
 from altfuse.errors import AltfuseError
 from altfuse.fuse import METHODS, FusionInput
 from altfuse.fuse.base import FusionResult, combine
-from altfuse.guard import FLOOR_M, GROSS_M, MIN_S, excursion, guard
+from altfuse.guard import BRIDGE_S, FLOOR_M, GROSS_M, MIN_S, excursion, guard
 from altfuse.metrics import white_noise_sigma
 from altfuse.pipeline import FuseOptions, fuse_log
 from conftest import ROOT, SHARED_LOGS, shared_log
@@ -51,6 +51,21 @@ def test_a_long_excursion_is_flagged_and_a_short_one_is_not() -> None:
     small = guard(shifted(inputs, 100, 200, 0.8 * FLOOR_M), inputs)
     assert small.record["diverged_ticks"] == 0  # below the floor in metres
     assert small.result.status is small.result.status  # nothing to flag: the result as it was
+
+
+def test_an_excursion_is_not_cut_short_by_a_pause_of_a_tick() -> None:
+    """Two 1.5 s stretches 5 m above both sensors, one tick apart: one 3.1 s excursion (two
+    of 1.5 s went unflagged); the same two 1 s apart are two short ones."""
+    inputs = heights()
+    result = shifted(inputs, 100, 131, 5.0)
+    result.fused[115] -= 5.0  # one tick back among the sensors
+    bridged = guard(result, inputs)
+    assert bridged.record["spans_s"] == [[10.0, pytest.approx(13.0)]]
+    assert bridged.record["diverged_ticks"] == 31
+    apart = shifted(inputs, 100, 135, 5.0)
+    apart.fused[115:125] -= 5.0  # 1 s back: longer than BRIDGE_S
+    assert guard(apart, inputs).record["diverged_ticks"] == 0
+    assert BRIDGE_S < 1.0
 
 
 def test_a_gross_excursion_is_flagged_however_brief() -> None:
@@ -113,17 +128,17 @@ def test_a_divergence_is_warned_in_one_line_and_reported_by_evaluate_and_batch(
     assert result.exit_code == 0, result.output
     warnings = [line for line in result.stderr.splitlines() if "diverged" in line]
     assert warnings == [
-        "altfuse: warning: hover.bin: delay1 left every sensor on 1635 ticks (by up to 113.2 m): "
+        "altfuse: warning: hover.bin: delay1 left every sensor on 1653 ticks (by up to 113.2 m): "
         "status 'diverged'"
     ]
     table = pd.read_csv(out)
     meta = json.loads(out.with_suffix(".meta.json").read_text())
-    assert (table.status == "diverged").sum() == meta["guard"]["diverged_ticks"] == 1635
-    assert meta["status_counts"]["diverged"] == 1635
+    assert (table.status == "diverged").sum() == meta["guard"]["diverged_ticks"] == 1653
+    assert meta["status_counts"]["diverged"] == 1653
     report = CliRunner().invoke(
         cli, ["evaluate", str(log), "--methods", "support,delay1", "--form", "paper"]
     )
-    assert "diverged: delay1 left every sensor on 1635 ticks" in report.stdout
+    assert "diverged: delay1 left every sensor on 1653 ticks" in report.stdout
     assert "diverged: support" not in report.stdout
     folder = tmp_path / "in"
     folder.mkdir()
@@ -131,4 +146,4 @@ def test_a_divergence_is_warned_in_one_line_and_reported_by_evaluate_and_batch(
     args = ["batch", str(folder), "-o", str(tmp_path / "b"), *paper, "--jobs", "1"]
     assert CliRunner().invoke(cli, args).exit_code == 0
     summary = pd.read_csv(tmp_path / "b" / "summary.csv")
-    assert summary.diverged[0] == 1635
+    assert summary.diverged[0] == 1653
