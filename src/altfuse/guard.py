@@ -71,7 +71,7 @@ def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
     s = np.where(edge >= 0, noise[np.maximum(edge, 0)], 0.0)
     f = result.tick_traces.get("fused_std", np.zeros(fused.size))
     limit = np.maximum(FLOOR_M, SIGMAS * np.sqrt(s**2 + np.nan_to_num(f) ** 2))
-    beyond = bridged(np.nan_to_num(away) > limit, round(BRIDGE_S / inputs.dt_s))
+    beyond = _bridged(np.nan_to_num(away) > limit, round(BRIDGE_S / inputs.dt_s))
     long_enough = max(1, round(MIN_S / inputs.dt_s))
     gross = np.nan_to_num(away) > GROSS_M
     spans = [(a, b) for a, b in runs(beyond) if b - a >= long_enough or gross[a:b].any()]
@@ -95,7 +95,7 @@ def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
     return Guarded(replace(result, status=status), record)
 
 
-def bridged(mask: np.ndarray, gap: int) -> np.ndarray:
+def _bridged(mask: np.ndarray, gap: int) -> np.ndarray:
     """``mask`` with each pause of fewer than ``gap`` False ticks between two runs of True
     filled."""
     out: np.ndarray = mask.copy()
