@@ -181,6 +181,25 @@ def test_a_known_barometer_scale_is_found_and_removed() -> None:
     assert np.max(np.abs(offset_only.h[:, 1] - h)) > 7.0
 
 
+def test_without_a_gps_a_barometer_s_scale_is_found_against_the_rangefinder() -> None:
+    """An indoor flight (no GPS): a rangefinder over a flat floor and a barometer 6 % high.
+    The scale went "not estimated: no GPS", and the smoother followed the barometer 0.4-0.7 m
+    above the rangefinder (the simulators' 9 and 10 m sonar flights with their GPS left out)."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 120.0, 0.1)
+    h = np.interp(t, [0, 20, 30, 100, 110, 120], [0, 0, 10, 10, 0, 0])
+    rangefinder = 0.1 + h + rng.normal(0, 0.01, t.size)
+    baro = 2.0 + 1.06 * h + rng.normal(0, 0.05, t.size)
+    names = ("rangefinder", "baro")
+    z = np.column_stack([rangefinder, baro])
+    baro_offset = {
+        o.name: o
+        for o in refer_to_takeoff(Aligned(t, names, names, z, 10.0, 1.0, "union", {})).offsets
+    }["baro"]
+    assert "against rangefinder" in str(baro_offset.scale_method)
+    assert baro_offset.scale == pytest.approx(1.06, abs=0.005)
+
+
 @pytest.mark.parametrize(
     ("scale", "climb_m", "drift", "why"),
     [
