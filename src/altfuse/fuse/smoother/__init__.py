@@ -146,7 +146,8 @@ coefficient (0.24 m/degC against 0.12), and every height after the rangefinder w
 
 Outputs: the smoothed height at the clock's ticks, its standard deviation (``fused_std``: the
 model's, and the sensors' common latency behind the log's timestamps, ``TIMING_SIGMA_S``, times
-the smoothed climb rate), the
+the smoothed climb rate; in a log without GPS also the barometers' scale error that nothing
+pins, times the height and their share, :func:`.model.unpinned_scales`), the
 velocity, bias and each sensor's offset (or ground height), and each sensor's contribution: the
 share, per tick, of the total Kalman gain on ``h`` that its accepted samples carried. In the
 metadata, the model's own check per sensor: ``nis_<sensor>``, the mean squared normalised
@@ -215,6 +216,7 @@ from altfuse.fuse.smoother.model import (
     reset_events,
     still_events,
     thermal_regressors,
+    unpinned_scales,
 )
 from altfuse.fuse.smoother.noise import (
     Q_ACCEL_NO_IMU,
@@ -378,6 +380,9 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     del out  # the events' states, before the result's arrays
     release_free_memory()
     weights, valid = contributions(who, gain_h, inputs.z)
+    # the barometers' scale error nothing in the log pins, at the height, by their share
+    scales = unpinned_scales(kinds, inputs.scale_known, inputs.scale_unknown, layout)
+    var_h = var_h + (xs[:, 0] * (np.nan_to_num(weights) @ scales)) ** 2
     n_valid = np.isfinite(inputs.z).sum(axis=1)
     status = np.where(n_valid == 1, SINGLE, np.where(valid, FUSED, NONE))
     return FusionResult(

@@ -230,6 +230,31 @@ def scales_to_relearn(
     return {i: k for i, k in enumerate(known) if k is not None and k[1] > LEARN_SCALE_STD}
 
 
+def unpinned_scales(
+    kinds: Sequence[str],
+    known: Sequence[tuple[float, float] | None],
+    unknown: Sequence[tuple[float, float] | None],
+    layout: Layout,
+) -> FloatArray:
+    """Per sensor, the standard error of a barometer's scale where no GPS pins it and the
+    smoother does not learn it (0 elsewhere): the datum's error of its estimate (``known``:
+    applied, ``unknown``: not), at most SCALE_PRIOR, or SCALE_PRIOR where it has none.
+
+    Barometers alone share the error of their scale, which the smoother cannot see: its band
+    held the height of barometers 5-8 % high to centimetres (the simulators' planes with their
+    GPS left out: 2.6 and 1.7 m RMSE, +-2 sigma coverage 0.03 and 0.32), and a barometer followed
+    against a rejected rangefinder 0.7 m off (coverage 0.04)."""
+    out = np.zeros(len(kinds))
+    if "gps" in kinds:
+        return out
+    learnt = {r.sensor for r in layout.regressors if r.name == "scale"}
+    for i, kind in enumerate(kinds):
+        if kind == "baro" and i not in learnt:
+            told = known[i] or unknown[i]
+            out[i] = SCALE_PRIOR if told is None else min(told[1], SCALE_PRIOR)
+    return out
+
+
 def scales_to_learn(unknown: Sequence[tuple[float, float] | None]) -> list[int]:
     """The barometers whose scale the datum estimated to within SCALE_PRIOR and did not apply
     (``unknown``, per sensor: the estimate and its error, or None)."""
