@@ -328,11 +328,17 @@ def _covered(t: FloatArray, rt: FloatArray, lo: float, hi: float) -> npt.NDArray
 
 
 def gps_lags(series: Sequence[Series]) -> dict[str, Lag]:
-    """Each GPS's lag behind the first barometer (:func:`estimate_lag`); none without one."""
-    baros = [s for s in series if s.kind == "baro"]
-    if not baros:
+    """Each GPS's lag behind the first barometer (:func:`estimate_lag`), without one behind the
+    first rangefinder (its height's changes are the vertical motion's over the ground it sees;
+    the simulators' 8 m rangefinder flight with its barometer left out: the GPS 0.2 s late in
+    the climbs, 0.19 m below the rangefinder, and the fused height with it); none without
+    either."""
+    references = [s for s in series if s.kind == "baro"] or [
+        s for s in series if s.kind == "rangefinder"
+    ]
+    if not references:
         return {}
-    return {s.name: estimate_lag(s, baros[0]) for s in series if s.kind == "gps"}
+    return {s.name: estimate_lag(s, references[0]) for s in series if s.kind == "gps"}
 
 
 def shift(series: Series, lag: Lag) -> Series:
