@@ -261,25 +261,25 @@ def without(name: str, kind: str) -> Prepared:
 
 
 @pytest.mark.parametrize(
-    ("name", "left_out", "within_bar"),
+    ("name", "left_out"),
     [
-        ("plane_4.5.0dev_eozbademci_autotest_climb88m.BIN", "gps", False),
-        ("copter_3.7dev_maikbasso_sonar_10m.BIN", "gps", True),
-        ("copter_4.5.0dev_skyrats_rfnd_8m.BIN", "baro", True),
+        ("plane_4.5.0dev_eozbademci_autotest_climb88m.BIN", "gps"),
+        ("copter_3.7dev_maikbasso_sonar_10m.BIN", "gps"),
+        ("copter_4.5.0dev_skyrats_rfnd_8m.BIN", "baro"),
     ],
 )
 def test_a_flight_without_a_gps_or_a_barometer_is_fused_with_an_honest_band(
-    name: str, left_out: str, within_bar: bool
+    name: str, left_out: str
 ) -> None:
     """Two barometers alone (their common 5 % scale: the band held them to centimetres, 2.6 m
-    off, coverage 0.03); a barometer with a rangefinder (its scale was not estimated without a
-    GPS: 0.40 m above the rangefinder, coverage 0.15); a GPS with a rangefinder (its lag was not
-    estimated without a barometer: 0.19 m late in the climbs, 0.049 m RMSE against the
-    rangefinder's 0.012)."""
+    off, coverage 0.03; a temperature coefficient learnt from the accelerometer alone took them
+    0.5 m further than either barometer); a barometer with a rangefinder (its scale was not
+    estimated without a GPS: 0.40 m above the rangefinder, coverage 0.15); a GPS with a
+    rangefinder (its lag was not estimated without a barometer: 0.19 m late in the climbs,
+    0.049 m RMSE against the rangefinder's 0.012). Each within the bar on RMSE and maximum."""
     evaluation = evaluate_prepared(without(name, left_out), ["smoother"], truth="sim")
     result = verdict(evaluation, "smoother")
     assert result["coverage"] >= 0.9, result
     fails = result["fails"]
     assert isinstance(fails, list)
-    if within_bar:
-        assert not {"rmse", "max"} & set(fails), result
+    assert not {"rmse", "max"} & set(fails), result
