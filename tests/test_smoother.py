@@ -570,7 +570,8 @@ def test_a_barometer_alone_refuses_an_accelerometer_it_contradicts() -> None:
 def test_the_acceleration_noise_is_raised_where_the_smoothed_flight_departs_from_it() -> None:
     """EM's M-step per second: the smoothed velocity gains 1 m/s in the third second that the
     accelerometer (reading 0.5 m/s^2 throughout, its bias 0.5) does not explain; there the
-    density becomes ACCEL_EM_GAIN * 1^2 / 1 s, elsewhere it keeps the log's own."""
+    density becomes ACCEL_EM_GAIN * 1^2 / 1 s, elsewhere it keeps the log's own; and so
+    without an accelerometer, where the density is the velocity's random walk's."""
     t = np.arange(0.0, 5.0, 0.1)
     v = np.where(t >= 2.5, 1.0, 0.0)
     x = np.column_stack([np.zeros(t.size), v, np.full(t.size, 0.5)])
@@ -582,8 +583,12 @@ def test_the_acceleration_noise_is_raised_where_the_smoothed_flight_departs_from
     third = (t >= 2.0 - 1e-9) & (t < 3.0 - 1e-9)
     np.testing.assert_allclose(raised[third], ACCEL_EM_GAIN * 1.0**2 / 1.0, rtol=1e-9)
     np.testing.assert_array_equal(raised[~third], floor[~third])
-    # without the accelerometer there is nothing to raise
-    assert em_accel(replace(ev, use_bias=False), {"x": x}, floor).q_accel is floor
+    # without the accelerometer (a = 0, b = 0) the velocity's own change raises it the same
+    alone = replace(ev, use_bias=False, a=np.zeros(t.size))
+    x[:, 2] = 0.0
+    raised = em_accel(alone, x, floor).q_accel
+    np.testing.assert_allclose(raised[third], ACCEL_EM_GAIN * 1.0**2 / 1.0, rtol=1e-9)
+    np.testing.assert_array_equal(raised[~third], floor[~third])
 
 
 def test_the_model_check_fails_on_the_sensors_beyond_twice_their_variance() -> None:

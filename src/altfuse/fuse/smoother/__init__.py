@@ -70,7 +70,8 @@ Bridged by the model instead, a real log's barometer drift rate carried 1.8 m ov
 pause, and the fused height sat that far above both sensors after it (0.10 m since).
 
 Without IMU or ATT records the model falls back to altitude only: ``a = 0``, ``b`` frozen at 0,
-and a larger acceleration noise (a constant-velocity random walk); the metadata says so.
+and a larger acceleration noise (a constant-velocity random walk), raised per second by EM where
+the smoothed flight asks for it (:func:`.noise.em_accel`); the metadata says so.
 
 From the log itself:
 
