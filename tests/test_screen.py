@@ -354,3 +354,19 @@ def test_a_gps_frozen_through_a_climb_drags_no_method(relative: str, tmp_path: P
     rmse = {r.name: r.overall.rmse for r in result.rows if r.kind == "method"}
     assert set(rmse) == {"mean", "support", "delay1", "delay2", "multilayer", "smoother"}
     assert max(rmse.values()) < 1.5, rmse
+
+
+def test_a_spike_an_aircraft_cannot_fly_is_dropped_and_noise_is_not() -> None:
+    """Spikes of 2-5 m at 10 Hz (20-50 m/s, under the speed rule's 10 m) are out and back at
+    hundreds of m/s^2; a barometer's noise grown to 0.6 m for a while (prop wash) is kept."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 60.0, 0.1)
+    quiet = np.where((t > 20) & (t < 30), 0.6, 0.05)
+    baro = 10.0 * np.sin(t / 10) + quiet * rng.normal(0.0, 1.0, t.size)
+    spiked = baro.copy()
+    at = np.array([50, 150, 400, 520])
+    spiked[at] += np.array([2.0, -3.0, 5.0, 2.5])
+    out = screen_series(series("baro", t, spiked), None)
+    assert out.dropped == {SPIKE: 4}
+    assert not np.isin(t[at], out.t).any()
+    assert screen_series(series("baro", t, baro), None).dropped == {}

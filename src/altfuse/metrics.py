@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import bottleneck as bn
@@ -30,12 +31,24 @@ def running_median(x: FloatArray, window: int, min_periods: int = 1) -> FloatArr
     where fewer than ``min_periods`` are valid: pandas' ``rolling(window, center=True,
     min_periods).median()`` (for an even window, one more sample behind than ahead), by
     bottleneck's ``move_median`` (its import is milliseconds where pandas' is 0.3 s)."""
+    return _centred(bn.move_median, x, window, min_periods)
+
+
+def running_max(x: FloatArray, window: int) -> FloatArray:
+    """The largest over the same centred window (:func:`running_median`), NaN skipped."""
+    return _centred(bn.move_max, x, window, 1)
+
+
+def _centred(
+    move: Callable[..., FloatArray], x: FloatArray, window: int, min_periods: int
+) -> FloatArray:
+    """bottleneck's trailing ``move`` over ``window`` samples, centred."""
     if x.size == 0:
         return np.zeros(0)
     ahead = (window - 1) // 2
     before = max(0, window - x.size - ahead)  # NaN in front: a window longer than the data
     padded = np.concatenate((np.full(before, np.nan), x, np.full(ahead, np.nan)))
-    out: FloatArray = bn.move_median(padded, window, min_count=min_periods)[before + ahead :]
+    out: FloatArray = move(padded, window, min_count=min_periods)[before + ahead :]
     return out
 
 
