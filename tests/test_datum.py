@@ -323,6 +323,28 @@ def test_a_segment_s_samples_are_referred_with_its_own_datum() -> None:
         assert (samples.t > 110).sum() > 500  # the second flight's samples are there
 
 
+def test_a_barometer_s_scale_is_the_one_its_best_segment_tells() -> None:
+    """A reboot splits a log: the longer part hovers 5 m up (its barometer's 6 % cannot be
+    told there), the shorter climbs 60 m (it can). Both parts take the second's scale: one
+    barometer, one scale, in the heights and in the samples the smoother fuses."""
+    rng = np.random.default_rng(8)
+    t = np.arange(0.0, 300.0, 0.1)
+    h = np.interp(t, [0, 20, 25, 180, 185, 200, 220, 240, 260, 280, 300],
+                  [0, 0, 5, 5, 0, 0, 0, 60, 60, 0, 0])  # fmt: skip
+    baro = np.where(t < 200, 3.0, 0.0) + 1.06 * h + rng.normal(0, 0.05, t.size)
+    gps = 400 + h + rng.normal(0, 0.05, t.size)
+    z = np.column_stack([gps, baro])
+    z[(t > 185) & (t < 200)] = np.nan
+    names = ("gps", "baro")
+    ref = refer_to_takeoff(Aligned(t, names, names, z, 10.0, 1.0, "union", {}), splices=[200.0])
+    assert ref.segments[1].datum.startswith("its own")
+    baro_main = {o.name: o for o in ref.offsets}["baro"]
+    baro_second = {o.name: o for o in ref.segments[1].offsets}["baro"]
+    assert baro_main.scale == baro_second.scale == pytest.approx(1.06, abs=0.01)
+    assert "in another segment" in str(baro_main.scale_method)
+    np.testing.assert_allclose(ref.h[t < 185, 1], h[t < 185], atol=0.25)
+
+
 def test_a_segment_resumed_in_flight_keeps_the_main_datum() -> None:
     aligned, _ = two_flights(second_takes_off=False)
     ref = refer_to_takeoff(aligned, splices=[110.0])

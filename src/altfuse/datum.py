@@ -313,13 +313,25 @@ def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what t
     valid = np.asarray(np.isfinite(aligned.z).any(axis=1), dtype=bool)
     main = max(pieces, key=lambda p: int(valid[p[0] : p[1]].sum()))
     options = (ground_window_s, takeoff_climb_m, referral, clearances)
-    first = _refer_segment(aligned.part(*main), *options)
+    owns = {
+        (a, b): _refer_segment(aligned.part(a, b), *options)
+        if (a, b) == main
+        else _own_datum(aligned.part(a, b), *options, speed)
+        for a, b in pieces
+    }
+    # a barometer's scale is the sensor's, whichever segment tells it best
+    best = _best_scales([r for r in owns.values() if r is not None])
+    owns = {
+        p: None if r is None else _with_scales(r, aligned.part(*p), best) for p, r in owns.items()
+    }
+    first = owns[main]
+    assert first is not None  # the main segment is referred, or raises
     columns = [aligned.names.index(n) for n in first.names]
     h = np.full((t.size, len(columns)), np.nan)
     segments = []
     for a, b in pieces:
         part = aligned.part(a, b)
-        own = None if (a, b) == main else _own_datum(part, *options, speed)
+        own = None if (a, b) == main else owns[a, b]
         grounded, still = True, None
         offsets: tuple[Offset, ...] = ()
         if (a, b) == main:
@@ -339,6 +351,41 @@ def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what t
             span = (float(ticks[0]), float(ticks[-1]))
             segments.append(Segment(*span, how, grounded, still, offsets))
     return replace(first, t=t, h=h, segments=tuple(segments))
+
+
+def _best_scales(referrals: Sequence[Referred]) -> dict[str, Offset]:
+    """Per barometer, the offset whose applied scale has the least standard error among the
+    segments' referrals."""
+    best: dict[str, Offset] = {}
+    for referred in referrals:
+        for o in referred.offsets:
+            if o.scale_applied and o.scale_std is not None:
+                known = best.get(o.name)
+                if known is None or o.scale_std < (known.scale_std or math.inf):
+                    best[o.name] = o
+    return best
+
+
+def _with_scales(referred: Referred, part: Aligned, best: Mapping[str, Offset]) -> Referred:
+    """``referred`` (of the aligned ``part``) with each barometer's scale ``best``'s, its
+    heights rescaled: a segment's own fit on a shorter climb (the Solo's log with a GPS 0.3 m
+    noisy: the main segment's 42 m climb 1.038 +- 0.014, the other's 154 m climb 1.052 +- 0.007,
+    SIM's 1.052) no longer refers the same barometer two ways."""
+    h, offsets = referred.h.copy(), list(referred.offsets)
+    for j, o in enumerate(offsets):
+        chosen = best.get(o.name)
+        if chosen is None or chosen is o:
+            continue
+        offsets[j] = replace(
+            o,
+            scale=chosen.scale,
+            scale_std=chosen.scale_std,
+            scale_method=f"{chosen.scale_method} (in another segment of the log)",
+            scale_applied=True,
+            scale_estimate=chosen.scale_estimate,
+        )
+        h[:, j] = (part.z[:, part.names.index(o.name)] - o.offset_m) / chosen.scale
+    return replace(referred, h=h, offsets=tuple(offsets))
 
 
 def _own_datum(
