@@ -17,8 +17,8 @@ with one constant offset ``c_i``, found in this order:
 3. Otherwise it is dropped, with that reason.
 
 A barometer is also scaled (``referral="full"``, the default): ``h = (z - c) / scale``, the
-scale fitted against the GPS over the flight, without a GPS against a rangefinder
-(:func:`baro_scales`). Barometers read 3-8 % high
+scale fitted against the GPS over the flight, or a rangefinder where it tells the scale
+better (:func:`baro_scales`). Barometers read 3-8 % high
 in the simulators' climbs (16 m at 305 m) and real ones do the same (a sensor warmer than the
 air; ArduPilot issue 15025: "both an offset and a gain"); an offset alone leaves that to every
 method that averages. The scale is applied only where the flight can tell it: enough vertical
@@ -553,12 +553,14 @@ def _refer(
 
 
 def baro_scales(aligned: Aligned, h: FloatArray, offsets: dict[int, Offset]) -> dict[int, Scale]:
-    """Each barometer's scale against the GPS with the most referred ticks, without a GPS the
-    rangefinder with the most (see the module doc). The simulators' sonar flights with their GPS
-    left out had scale 1, "not estimated: no GPS", and the smoother followed the barometer 0.40
-    and 0.70 m above the rangefinder; against the rangefinder the 10 m one's is 1.052 +- 0.005,
-    applied: 0.021 m (the 8 m rangefinder's 0.223 -> 0.017 m). The 9 m one's, 1.083 +- 0.033
-    (one 6 s climb among its 10 s spans), is not applied.
+    """Each barometer's scale against the GPS with the most referred ticks, or against the
+    rangefinder with the most where that fit's standard error is the smaller (see the module
+    doc). The simulators' sonar flights with their GPS left out had scale 1, "not estimated: no
+    GPS", and the smoother followed the barometer 0.40 and 0.70 m above the rangefinder; with a
+    real receiver's GPS (0.3 m noisy, wandering) 0.37 and 0.65 m. Against the rangefinder the
+    10 m one's is 1.052 +- 0.005, applied: 0.021 and 0.026 m (the 8 m rangefinder's 0.223 ->
+    0.017 and 0.016 m). The 9 m one's without GPS, 1.083 +- 0.033 (one 6 s climb among its 10 s
+    spans), is not applied. With the simulators' own GPS, the GPS's fit is the better on all.
 
     ``h`` holds the sources referred by offsets only. Over the ticks where both are valid,
     ``h_baro = scale * h_gps + drift * t + b`` by least squares, twice more without those beyond
@@ -573,16 +575,23 @@ def baro_scales(aligned: Aligned, h: FloatArray, offsets: dict[int, Offset]) -> 
     baros = [i for i in offsets if kinds[i] == "baro"]
     if not baros:
         return {}
-    # without a GPS, a rangefinder: over the ground it measures, the height itself
-    references = [j for j in offsets if kinds[j] == "gps"] or [
-        j for j in offsets if kinds[j] == "rangefinder"
+    # the GPS, and a rangefinder: over the ground it measures, the height itself
+    references = [
+        max(found, key=lambda j: (int(np.isfinite(h[:, j]).sum()), -j))
+        for kind in ("gps", "rangefinder")
+        if (found := [j for j in offsets if kinds[j] == kind])
     ]
     if not references:
         return {
             i: Scale(1.0, None, "", "not estimated: no GPS or rangefinder", False) for i in baros
         }
-    j = max(references, key=lambda j: (int(np.isfinite(h[:, j]).sum()), -j))
-    return {i: _scale(aligned.t, h[:, j], h[:, i], names[j]) for i in baros}
+    return {
+        i: min(
+            (_scale(aligned.t, h[:, j], h[:, i], names[j]) for j in references),
+            key=lambda sc: math.inf if sc.std is None else sc.std,
+        )
+        for i in baros
+    }
 
 
 def _scale(t: FloatArray, x: FloatArray, y: FloatArray, reference: str) -> Scale:
