@@ -139,7 +139,8 @@ class Offset:
 
 @dataclass(frozen=True)
 class Scale:
-    """A barometer's scale against a GPS: ``z_baro - c = scale * h_gps + b`` over the flight."""
+    """A barometer's scale against a GPS or a rangefinder (the reference):
+    ``z_baro - c = scale * h_ref + b`` over the flight."""
 
     scale: float
     std: float | None  # None: not estimated
