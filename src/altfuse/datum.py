@@ -680,17 +680,24 @@ def referred_samples(sensors: Sequence[Series], referred: Referred) -> tuple[Sam
     sensors in the table, band 8 mm)."""
     by_name = {s.name: s for s in sensors}
     starts = [seg.start_s for seg in referred.segments]
+    # each segment with a datum of its own: its span, from its first tick to the next
+    # segment's (where the smoother starts afresh), and its offsets by sensor
+    owns = [
+        (
+            segment.start_s if k else -math.inf,
+            starts[k + 1] if k + 1 < len(starts) else math.inf,
+            {x.name: x for x in segment.offsets},
+        )
+        for k, segment in enumerate(referred.segments)
+        if segment.offsets
+    ]
     out = []
     for o in referred.offsets:
         s = by_name[o.name]
         value, keep = (s.value - o.offset_m) / o.scale, np.ones(s.t.size, dtype=bool)
-        for k, segment in enumerate(referred.segments):
-            if not segment.offsets:
-                continue  # the main segment's datum, as above
-            # from its first tick to the next segment's: where the smoother starts afresh
-            end = starts[k + 1] if k + 1 < len(starts) else math.inf
-            inside = (s.t >= (segment.start_s if k else -math.inf)) & (s.t < end)
-            own = {x.name: x for x in segment.offsets}.get(o.name)
+        for start, end, offsets in owns:
+            inside = (s.t >= start) & (s.t < end)
+            own = offsets.get(o.name)
             if own is None:
                 keep &= ~inside
             else:

@@ -34,6 +34,16 @@ def running_median(x: FloatArray, window: int, min_periods: int = 1) -> FloatArr
     return _centred(bn.move_median, x, window, min_periods)
 
 
+def running_white_noise(z: FloatArray, window: int, min_periods: int = 1) -> FloatArray:
+    """The white noise around each sample of ``z`` (three at least), as
+    :func:`white_noise_sigma` from the median absolute second difference, over a centred window
+    of ``window`` of them (the first and last sample take their neighbour's); NaN where fewer
+    than ``min_periods`` are there."""
+    d2 = np.abs(np.diff(z, 2))
+    d2 = np.concatenate(([d2[0]], d2, [d2[-1]]))
+    return MAD_TO_SIGMA * running_median(d2, window, min_periods) / math.sqrt(6.0)
+
+
 def running_max(x: FloatArray, window: int) -> FloatArray:
     """The largest over the same centred window (:func:`running_median`), NaN skipped."""
     return _centred(bn.move_max, x, window, 1)

@@ -40,13 +40,12 @@ the rangefinder by cos(1.7e36).
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
 
-from altfuse.metrics import MAD_TO_SIGMA, running_max, running_median, white_noise_sigma
+from altfuse.metrics import running_max, running_median, running_white_noise, white_noise_sigma
 from altfuse.model import Attitude, FlightLog, FloatArray, Imu, Series, Vibration
 
 Mask = npt.NDArray[np.bool_]
@@ -168,12 +167,11 @@ def _spikes(t: FloatArray, v: FloatArray) -> Mask:
     )
     # out and back between its neighbours: a departure of d from both needs an acceleration of
     # about 2 d / (dt_prev dt_next); and beyond the noise around it (a barometer's grows in prop
-    # wash), from its second differences' running median absolute value, the largest nearby
-    # (where the noise grows, a window half in the quiet part reads it too low)
+    # wash), the largest nearby (where the noise grows, a window half in the quiet part reads
+    # it too low)
     depart = np.minimum(np.abs(d_prev), np.abs(d_next))
-    d2 = np.abs(v[2:] - 2 * v[1:-1] + v[:-2])
-    local = running_max(running_median(d2, SPIKE_NOISE_WINDOW), SPIKE_NOISE_WINDOW)
-    noise = MAD_TO_SIGMA * local / math.sqrt(6.0)
+    local = running_white_noise(v, SPIKE_NOISE_WINDOW)
+    noise = running_max(local, SPIKE_NOISE_WINDOW)[1:-1]
     sharp = depart > np.maximum(
         MAX_VERTICAL_ACCEL_M_S2 * dt_prev * dt_next / 2, SPIKE_NOISE_SIGMAS * noise
     )

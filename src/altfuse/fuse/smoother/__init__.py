@@ -386,7 +386,8 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     weights, valid = contributions(who, gain_h, inputs.z)
     # the barometers' scale error nothing in the log pins, at the height, by their share
     scales = unpinned_scales(kinds, inputs.scale_known, inputs.scale_unknown, layout)
-    var_h = var_h + (xs[:, 0] * (np.nan_to_num(weights) @ scales)) ** 2
+    if scales.any():
+        var_h = var_h + (xs[:, 0] * (np.nan_to_num(weights) @ scales)) ** 2
     n_valid = np.isfinite(inputs.z).sum(axis=1)
     status = np.where(n_valid == 1, SINGLE, np.where(valid, FUSED, NONE))
     return FusionResult(
@@ -487,9 +488,8 @@ def _layout(
     vertical velocity's lag where the accelerometer (``accel``) tells it."""
     times, who, position = events
     samples = inputs.samples
-    regressors = []
-    if set(inputs.kinds) - {"baro"}:
-        regressors = thermal_regressors(inputs.temperatures, samples, who, position)
+    alone = set(inputs.kinds) == {"baro"}  # nothing to tell a temperature from the height
+    regressors = [] if alone else thermal_regressors(inputs.temperatures, samples, who, position)
     if accel is not None and (who == VELOCITY).any():
         regressors.append(lag_regressor(who, times, accel))
     return Layout(

@@ -242,8 +242,7 @@ def unpinned_scales(
 
     Barometers alone share the error of their scale, which the smoother cannot see: its band
     held the height of barometers 5-8 % high to centimetres (the simulators' planes with their
-    GPS left out: 2.6 and 1.7 m RMSE, +-2 sigma coverage 0.03 and 0.32), and a barometer followed
-    against a rejected rangefinder 0.7 m off (coverage 0.04)."""
+    GPS left out: 2.6 and 1.7 m RMSE, +-2 sigma coverage 0.03 and 0.32)."""
     out = np.zeros(len(kinds))
     if "gps" in kinds:
         return out

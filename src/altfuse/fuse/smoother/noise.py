@@ -15,11 +15,11 @@ from altfuse.fuse.base import FusionInput
 from altfuse.fuse.smoother.events import VELOCITY, interval_mean
 from altfuse.fuse.smoother.model import Events
 from altfuse.metrics import (
-    MAD_TO_SIGMA,
     hold_nearest,
     mad_sigma,
     running_median,
     running_sum,
+    running_white_noise,
     white_noise_sigma,
 )
 from altfuse.model import FloatArray, Samples
@@ -205,13 +205,11 @@ def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) 
     window of ``window_s`` (sensors get noisier and quieter within a flight)."""
     if z.size < 5:
         return np.full(z.size, measurement_sigma(z))
-    d2 = np.abs(np.diff(z, 2))
-    d2 = np.concatenate(([d2[0]], d2, [d2[-1]]))
     step = float(np.median(np.diff(t)))
     # stamps microseconds apart (damaged) must not ask for a window longer than the samples
     width = min(z.size, max(5, round(window_s / step))) if step > 0 else z.size
-    med = running_median(d2, width, min_periods=3)
-    sigma = np.where(np.isfinite(med), MAD_TO_SIGMA * med / math.sqrt(6.0), measurement_sigma(z))
+    local = running_white_noise(z, width, min_periods=3)
+    sigma = np.where(np.isfinite(local), local, measurement_sigma(z))
     return np.asarray(np.maximum(sigma, _MIN_SIGMA_M))
 
 
