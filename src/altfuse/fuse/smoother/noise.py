@@ -161,6 +161,10 @@ def accel_refused(inputs: FusionInput, a: FloatArray) -> FloatArray:
     100 m off on its barometer alone (RMSE 6.9 m, 0.97 m since); a simulated GPS alone, noisier
     than the accelerometer, costs 0-0.07 m (13 of 159 flights moved, the smoother still the
     lowest on each).
+
+    Without an accelerometer ``a`` is 0: the altitude-only model's constant velocity is what
+    the sensors refuse (a plane pulled into a dive at 36 m/s^2 without IMU records: 16 m for a
+    second, 0.6 m since).
     """
     t, z, dt = inputs.t, inputs.z, inputs.dt_s
     steady = [i for i, k in enumerate(inputs.kinds) if k != "rangefinder"]
