@@ -154,8 +154,9 @@ coefficient (0.24 m/degC against 0.12), and every height after the rangefinder w
 
 Outputs: the smoothed height at the clock's ticks, its standard deviation (``fused_std``: the
 model's, and the sensors' common latency behind the log's timestamps, ``TIMING_SIGMA_S``, times
-the smoothed climb rate; in a log without GPS also the barometers' scale error that nothing
-pins, times the height and their share, :func:`.model.unpinned_scales`), the
+the smoothed climb rate; also the barometers' scale error that nothing pins, times the height
+and their share, :func:`.model.unpinned_scales`: in a log without GPS, or where the fit against
+the GPS cannot tell it to within 5 %), the
 velocity, bias and each sensor's offset (or ground height), and each sensor's contribution: the
 share, per tick, of the total Kalman gain on ``h`` that its accepted samples carried. In the
 metadata, the model's own check per sensor: ``nis_<sensor>``, the mean squared normalised
