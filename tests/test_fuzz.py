@@ -69,6 +69,7 @@ FOUND = [
     ("mission_faults.bin", ["fmt-type", "flip"], 3805302207, "delay2"),
     ("mission_faults.bin", ["fmt-absurd", "fmt-type"], 954682890, "smoother"),
     ("pymavlink_test.BIN", ["timestamps"], 3618519030, "delay2"),
+    ("mission.bin", ["fmt-type", "fmt-absurd", "garbage"], 1556144197, "smoother"),
 ]
 
 

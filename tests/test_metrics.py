@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from altfuse.metrics import hold_nearest, running_median, running_sum
+from altfuse.metrics import hold_nearest, running_median, running_sum, samples_in
 
 WINDOWS = [(w, m) for w in (1, 2, 3, 4, 5, 8, 51, 250) for m in (1, 3) if m <= w]
 
@@ -44,3 +44,21 @@ def test_hold_nearest_fills_forward_then_backward() -> None:
     y = rng.normal(size=100)
     y[rng.random(100) < 0.4] = np.nan
     np.testing.assert_array_equal(hold_nearest(y), pd.Series(y).ffill().bfill().to_numpy())
+
+
+@pytest.mark.parametrize(
+    ("span_s", "step", "most", "expected"),
+    [
+        (5.0, 0.1, 1000, 50),
+        (5.0, 0.1, 20, 20),  # more than there are
+        (5.0, 5e-324, 1000, 1000),  # stamps a denormal apart: 5 / step is infinite
+        (5.0, 0.0, 1000, 1000),  # none apart
+        (5.0, -0.1, 1000, 1000),  # stamps going back
+    ],
+)
+def test_samples_in_a_span_never_overflow_nor_exceed_the_samples(
+    span_s: float, step: float, most: int, expected: int
+) -> None:
+    """A damaged log's stamps, a denormal apart, made ``round(5 / step)`` raise an
+    OverflowError in the smoother's noise window (the long fuzz run: exit 3)."""
+    assert samples_in(span_s, step, most) == expected

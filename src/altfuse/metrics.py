@@ -26,6 +26,14 @@ def envelope(z: FloatArray) -> tuple[FloatArray, FloatArray]:
     return lo, hi
 
 
+def samples_in(span_s: float, step: float, most: int) -> int:
+    """How many samples ``step`` apart span ``span_s`` (rounded), at most ``most``: stamps a
+    few nanoseconds apart (a damaged log) ask for more than there are, or for infinitely
+    many, and none apart for a division by zero."""
+    ratio = span_s / step if step > 0 else math.inf
+    return round(ratio) if ratio < most else most
+
+
 def running_median(x: FloatArray, window: int, min_periods: int = 1) -> FloatArray:
     """The median over a centred window of ``window`` samples at each sample, NaN skipped, NaN
     where fewer than ``min_periods`` are valid: pandas' ``rolling(window, center=True,

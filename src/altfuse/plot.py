@@ -28,6 +28,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
+from altfuse.metrics import samples_in
 from altfuse.model import FloatArray
 from altfuse.params import InvalidParameter
 
@@ -193,7 +194,7 @@ def window_shares(t: FloatArray, weights: FloatArray, window_s: float) -> FloatA
     ``window_s`` (ticks with no weight count as none); NaN where no tick in it has any."""
     step = float(np.median(np.diff(t))) if t.size > 1 else 1.0
     # triangular: a box counts 4 or 5 samples of a 5 Hz sensor by turns (a comb in the shares)
-    half = min(max(1, round(window_s / step)), max(1, (t.size - 1) // 2))  # no longer than t
+    half = min(max(1, samples_in(window_s, step, t.size)), max(1, (t.size - 1) // 2))  # <= t
     kernel = np.bartlett(2 * half + 1)
     w = np.nan_to_num(weights)
     sums = np.column_stack([np.convolve(w[:, i], kernel, mode="same") for i in range(w.shape[1])])

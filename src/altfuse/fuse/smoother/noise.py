@@ -20,6 +20,7 @@ from altfuse.metrics import (
     running_median,
     running_sum,
     running_white_noise,
+    samples_in,
     white_noise_sigma,
 )
 from altfuse.model import FloatArray, Samples
@@ -119,7 +120,7 @@ def accel_spikes(t: FloatArray, a: FloatArray) -> FloatArray:
     if a.size < 2 * SPIKE_MIN_SAMPLES:
         return np.zeros(a.size)
     step = float(np.median(np.diff(t)))
-    width = max(SPIKE_MIN_SAMPLES, round(SPIKE_WINDOW_S / step) if step > 0 else 0) | 1
+    width = max(SPIKE_MIN_SAMPLES, samples_in(SPIKE_WINDOW_S, step, a.size) if step > 0 else 0) | 1
     e = a - running_median(a, width)
     excess = np.maximum(np.abs(e) - SPIKE_SIGMAS * mad_sigma(e), 0.0)
     dt = np.diff(t, append=t[-1] + step)
@@ -211,7 +212,7 @@ def local_sigma(t: FloatArray, z: FloatArray, window_s: float = NOISE_WINDOW_S) 
         return np.full(z.size, measurement_sigma(z))
     step = float(np.median(np.diff(t)))
     # stamps microseconds apart (damaged) must not ask for a window longer than the samples
-    width = min(z.size, max(5, round(window_s / step))) if step > 0 else z.size
+    width = min(z.size, max(5, samples_in(window_s, step, z.size)))
     local = running_white_noise(z, width, min_periods=3)
     sigma = np.where(np.isfinite(local), local, measurement_sigma(z))
     return np.asarray(np.maximum(sigma, _MIN_SIGMA_M))

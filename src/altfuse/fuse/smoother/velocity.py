@@ -32,7 +32,7 @@ from altfuse.fuse.base import FusionInput
 from altfuse.fuse.smoother.events import VELOCITY
 from altfuse.fuse.smoother.model import Regressor
 from altfuse.fuse.smoother.noise import CHECK_SIGMAS, CHECK_SLOPE_S, slope
-from altfuse.metrics import running_median, white_noise_sigma
+from altfuse.metrics import running_median, samples_in, white_noise_sigma
 from altfuse.model import FloatArray, Samples
 
 #: The sensor whose heights check the velocity: the receiver the reader took it from; and the
@@ -92,7 +92,7 @@ def lag_regressor(who: np.ndarray, times: FloatArray, accel: Samples) -> Regress
     order = np.argsort(accel.t, kind="stable")
     t, a = accel.t[order], accel.value[order]
     step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-    width = max(1, round(LAG_BOX_S / step)) if step > 0 else 1
+    width = max(1, samples_in(LAG_BOX_S, step, t.size)) if step > 0 else 1
     mine = who == VELOCITY
     coef = np.zeros(who.size)
     coef[mine] = -np.interp(times[mine], t, running_median(a, width))
