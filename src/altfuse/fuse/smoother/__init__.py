@@ -171,7 +171,7 @@ methods on every one (the closest: the climb with seed 1 and its barometer 7 % h
 support's); 94.8 % of the true errors within +-2 ``fused_std`` over all, 0.31
 to 1.00 per flight (the lowest on that climb), 77 of the flights within 0.90-0.99. On the
 simulators' 13 truth logs (``benchmarks/truth_accuracy.py``, README "Accuracy"): RMSE and
-maximum error within the project's bar on all 13; the coverage 0.909-1.000, within 0.90-0.99
+maximum error within the project's bar on all 13; the coverage 0.911-1.000, within 0.90-0.99
 on 8 (0.995-1.000 on five, among them those whose sensors lag the truth least:
 ``TIMING_SIGMA_S``; the quadplane's, whose scale the smoother learns, 0.997).
 Where GPS and barometer are alone through Paper A's
