@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,6 @@ from altfuse.evaluation import choose_truth, evaluate, evaluate_prepared
 from altfuse.fuse import METHODS
 from altfuse.fuse.smoother import SmootherParams
 from altfuse.io import read_log
-from altfuse.model import Series
 from altfuse.pipeline import (
     FuseOptions,
     Prepared,
@@ -30,6 +28,7 @@ from altfuse.pipeline import (
 )
 from conftest import SHARED_LOGS, shared_log
 from repeated import cut_log
+from variants import variant
 
 TRUTH = sorted(p.name for p in (SHARED_LOGS / "truth").glob("*.BIN"))
 OLD_CLOCK = [
@@ -254,11 +253,9 @@ def test_a_climbs_band_counts_the_sensors_unknown_latency() -> None:
     assert climbs >= 0.95
 
 
-def without(name: str, kind: str) -> Prepared:
-    """A truth log read with every source of ``kind`` left out (a flight without GPS)."""
-    flight = read_log(shared_log(f"truth/{name}"))
-    kept = tuple(s for s in flight.sensors if s.kind != kind)
-    return prepare(replace(flight, sensors=kept), FuseOptions())
+def changed(name: str, how: str) -> Prepared:
+    """A truth log read, changed as ``how`` says (``tests/variants.py``), and prepared."""
+    return prepare(variant(read_log(shared_log(f"truth/{name}")), how), FuseOptions())
 
 
 @pytest.mark.parametrize(
@@ -278,7 +275,7 @@ def test_a_flight_without_a_gps_or_a_barometer_is_fused_with_an_honest_band(
     estimated without a GPS: 0.40 m above the rangefinder, coverage 0.15); a GPS with a
     rangefinder (its lag was not estimated without a barometer: 0.19 m late in the climbs,
     0.049 m RMSE against the rangefinder's 0.012). Each within the bar on RMSE and maximum."""
-    evaluation = evaluate_prepared(without(name, left_out), ["smoother"], truth="sim")
+    evaluation = evaluate_prepared(changed(name, f"no-{left_out}"), ["smoother"], truth="sim")
     result = verdict(evaluation, "smoother")
     assert result["coverage"] >= 0.9, result
     fails = result["fails"]
@@ -291,17 +288,7 @@ def test_a_barometer_scale_a_real_receiver_cannot_tell_widens_the_band() -> None
     against it the barometer's 5 % is 0.99 +- 0.07, neither applied nor learnt, and the
     smoother follows the barometer 0.43 m above the truth; its band, the barometer's scale
     taken as exact, was 2-5 cm (coverage 0.05). It now counts the scale's physical spread."""
-    flight = read_log(shared_log("truth/copter_4.0.4rc2_leaerialtech_hexa_10m.BIN"))
-    rng = np.random.default_rng(1)
-
-    def noisy(s: Series) -> Series:
-        if s.kind != "gps":
-            return s
-        dt = np.maximum(np.diff(s.t, prepend=s.t[0]), 0.0)
-        walk = np.cumsum(rng.normal(0.0, 1.0, s.t.size) * np.sqrt(0.01 * dt))
-        return replace(s, value=s.value + rng.normal(0.0, 0.3, s.t.size) + walk)
-
-    prepared = prepare(replace(flight, sensors=tuple(map(noisy, flight.sensors))), FuseOptions())
+    prepared = changed("copter_4.0.4rc2_leaerialtech_hexa_10m.BIN", "noisy-gps")
     baro = {o.name: o for o in prepared.referred.offsets}["baro"]
     assert not baro.scale_applied
     assert baro.scale_std is not None
@@ -325,9 +312,7 @@ def test_a_plane_log_without_imu_records_is_fused_within_the_bar(name: str) -> N
     pull from a 7 m/s climb into a 29 m/s dive (36 m/s^2): the walk held the climb for 0.8 s,
     its GPS and barometer gated out, 16 m above both (0.694 m RMSE); the density the sensors'
     own change of slope asks for (as where they refuse an accelerometer) lets them in."""
-    flight = read_log(shared_log(f"truth/{name}"))
-    prepared = prepare(replace(flight, imu=None, attitude=None), FuseOptions())
-    evaluation = evaluate_prepared(prepared, ["smoother"], truth="sim")
+    evaluation = evaluate_prepared(changed(name, "no-imu"), ["smoother"], truth="sim")
     assert evaluation.runs["smoother"].result.params["accel_noise_raised_s"] > 0
     result = verdict(evaluation, "smoother")
     fails = result["fails"]

@@ -1,0 +1,84 @@
+"""Truth logs changed as other logs are (``benchmarks/variant_logs.py``, the tests): a sensor
+left out, no IMU records, sensors logged at a low rate, spiked samples, a GPS as noisy as a real
+one, a sensor's step. Each variant is made from the read log (``read_log``), before screening
+and alignment:
+
+- ``no-<kind>``: every source of that kind left out (``gps``, ``baro``, ``rangefinder``);
+- ``no-imu``: the IMU and attitude records left out (the altitude-only model);
+- ``rate-<hz>``: each altitude source kept at most once per 1/hz seconds;
+- ``spikes-<kind>``: 2 % of that kind's samples moved by 2-20 m up or down (seeded);
+- ``noisy-gps``: each GPS's heights with 0.3 m of white noise and a random walk of 0.01 m^2/s
+  (a real receiver's, where the simulators' is centimetres; seeded; ``noisy-<kind>`` the same
+  on another kind);
+- ``step-<kind>``: that kind's heights 1 m higher from half-way through each source's span
+  (a GPS's jump when its fix changes, a barometer's step).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from altfuse.model import FlightLog, Series
+
+ALTITUDE = ("gps", "baro", "rangefinder")
+
+
+def _each(flight: FlightLog, kind: str, change: Callable[[Series], Series]) -> FlightLog:
+    """``flight`` with ``change`` applied to each source of ``kind``."""
+    sensors = tuple(change(s) if s.kind == kind else s for s in flight.sensors)
+    return replace(flight, sensors=sensors)
+
+
+def _thinned(s: Series, _rng: np.random.Generator, hz: str) -> Series:
+    """At most one sample per ``1 / hz`` seconds."""
+    keep = np.r_[True, np.diff(np.floor(s.t / (1.0 / float(hz)))) > 0]
+    return replace(s, t=s.t[keep], value=s.value[keep])
+
+
+def _spiked(s: Series, rng: np.random.Generator, _: str) -> Series:
+    """2 % of the samples moved by 2-20 m up or down."""
+    hit = rng.random(s.t.size) < 0.02
+    jump = rng.choice([-1.0, 1.0], s.t.size) * rng.uniform(2.0, 20.0, s.t.size)
+    return replace(s, value=s.value + hit * jump)
+
+
+def _stepped(s: Series, _rng: np.random.Generator, _: str) -> Series:
+    """1 m higher from half-way through the source's span."""
+    half = s.t[0] + 0.5 * (s.t[-1] - s.t[0])
+    return replace(s, value=s.value + np.where(s.t >= half, 1.0, 0.0))
+
+
+def _noisy(s: Series, rng: np.random.Generator, _: str) -> Series:
+    """0.3 m of white noise and a random walk of 0.01 m^2/s (a real receiver's)."""
+    dt = np.maximum(np.diff(s.t, prepend=s.t[0]), 0.0)
+    walk = np.cumsum(rng.normal(0.0, 1.0, s.t.size) * np.sqrt(0.01 * dt))
+    return replace(s, value=s.value + rng.normal(0.0, 0.3, s.t.size) + walk)
+
+
+#: Each variant that changes samples: the kinds it changes (None: the one its name ends with,
+#: ``spikes-baro``) and how (each source, the generator, the name's end).
+CHANGES: dict[str, tuple[tuple[str, ...] | None, Callable[..., Series]]] = {
+    "rate": (ALTITUDE, _thinned),
+    "spikes": (None, _spiked),
+    "step": (None, _stepped),
+    "noisy": (None, _noisy),
+}
+
+
+def variant(flight: FlightLog, how: str, seed: int = 1) -> FlightLog:
+    """``flight`` changed as the variant ``how`` says (see the module doc)."""
+    rng = np.random.default_rng(seed)
+    what, _, arg = how.partition("-")
+    if what == "no" and arg == "imu":
+        return replace(flight, imu=None, attitude=None)
+    if what == "no":
+        return replace(flight, sensors=tuple(s for s in flight.sensors if s.kind != arg))
+    if what not in CHANGES or not arg:
+        raise ValueError(f"unknown variant {how!r}")
+    kinds, change = CHANGES[what]
+    for kind in kinds or (arg,):
+        flight = _each(flight, kind, lambda s: change(s, rng, arg))
+    return flight
