@@ -27,6 +27,7 @@ from altfuse.fuse.smoother.model import (
     GPS_CORRELATION_S,
     LEARN_SCALE_STD,
     OFFSET_PRIOR,
+    SCALE_PRIOR,
     STILL_SIGMA,
     Events,
     datum_priors,
@@ -42,7 +43,7 @@ from altfuse.fuse.smoother.noise import (
     wander_bound,
 )
 from altfuse.fuse.smoother.passes import LOCKOUT_S
-from altfuse.model import Samples
+from altfuse.model import Samples, SensorKind
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions, fuse_log, prepare_log, run_method
 from altfuse.simulate import simulate_flight, write_simulated_log
@@ -274,6 +275,43 @@ def test_the_sensors_unknown_latency_widens_the_band_by_the_climb_rate() -> None
     climbing = (t > 25.0) & (t < 35.0)
     assert np.median(np.abs(v[climbing])) == pytest.approx(2.0, abs=0.1)
     assert late.params["timing_sigma_s"] == 0.01
+
+
+def _climb_at_two_rates(kinds: tuple[SensorKind, SensorKind]) -> FusionInput:
+    """A 2 m/s climb to 40 m, its second sensor sampled at the clock's 10 Hz and its first at
+    5 Hz (every other tick), both 5 cm noisy, the accelerometer level."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 60.0, 0.1)
+    truth = np.where(t < 20.0, 0.0, np.minimum(t - 20.0, 20.0) * 2.0)
+    z = truth[:, None] + rng.normal(0.0, 0.05, (t.size, 2))
+    inputs = FusionInput.from_heights(z, 0.1, kinds=kinds, accel_up=np.zeros(t.size))
+    # on the clock at every tick (as the spline puts it), sampled at every other
+    return replace(inputs, samples=(Samples(t[::2], z[::2, 0]), inputs.samples[1]))
+
+
+@pytest.mark.parametrize("kinds", [("baro", "baro"), ("gps", "baro")])
+def test_a_barometer_scale_nothing_pins_widens_the_band_as_the_height_follows_it(
+    kinds: tuple[SensorKind, SensorKind],
+) -> None:
+    """SCALE_PRIOR of a barometer's height, times how far the smoothed height moves with its
+    scale: with two barometers alone (both unpinned, one error for both) all of it; beside a
+    GPS whose fit could not tell the scale, part of it, and as smoothly as the height (it was
+    the barometer's share of the gain at each tick: all of it between the GPS's samples)."""
+    inputs = _climb_at_two_rates(kinds)
+    pinned = fuse_smoother(replace(inputs, scale_known=((1.0, 0.0), (1.0, 0.0))), SmootherParams())
+    loose = replace(inputs, scale_unknown=((1.0, 0.2), (1.0, 0.2)))
+    unpinned = fuse_smoother(loose, SmootherParams())
+    np.testing.assert_array_equal(unpinned.fused, pinned.fused)
+    std, without = unpinned.tick_traces["fused_std"], pinned.tick_traces["fused_std"]
+    term = np.sqrt(std**2 - without**2)
+    top = unpinned.fused > 39.0
+    share = term[top] / (SCALE_PRIOR * unpinned.fused[top])
+    if kinds[0] == "baro":
+        np.testing.assert_allclose(share, 1.0, atol=0.02)
+    else:
+        assert 0.05 < np.median(share) < 0.95
+        ratio = std[21:] / std[20:-1]
+        assert np.max(np.abs(np.log(ratio[top[21:]]))) < 0.05
 
 
 def test_a_step_in_every_sensor_without_acceleration_is_followed() -> None:

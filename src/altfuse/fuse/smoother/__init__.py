@@ -154,9 +154,9 @@ coefficient (0.24 m/degC against 0.12), and every height after the rangefinder w
 
 Outputs: the smoothed height at the clock's ticks, its standard deviation (``fused_std``: the
 model's, and the sensors' common latency behind the log's timestamps, ``TIMING_SIGMA_S``, times
-the smoothed climb rate; also the barometers' scale error that nothing pins, times the height
-and their share, :func:`.model.unpinned_scales`: in a log without GPS, or where the fit against
-the GPS cannot tell it to within 5 %), the
+the smoothed climb rate; also the barometers' scale error that nothing pins,
+:func:`.model.unpinned_scales`, in a log without GPS or where the fit against the GPS cannot
+tell it to within 5 %, as far as the smoothed height follows it, :func:`scale_response`), the
 velocity, bias and each sensor's offset (or ground height), and each sensor's contribution: the
 share, per tick, of the total Kalman gain on ``h`` that its accepted samples carried. In the
 metadata, the model's own check per sensor: ``nis_<sensor>``, the mean squared normalised
@@ -206,7 +206,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult
-from altfuse.fuse.smoother.events import VELOCITY, contributions, interval_mean, merge_events
+from altfuse.fuse.smoother.events import (
+    TICK,
+    VELOCITY,
+    contributions,
+    interval_mean,
+    merge_events,
+)
 from altfuse.fuse.smoother.evidence import (
     STABLE_GAIN,
     drift_evidence,
@@ -241,7 +247,7 @@ from altfuse.fuse.smoother.noise import (
     offset_noise,
     state_noise,
 )
-from altfuse.fuse.smoother.passes import FOR_EM, FOR_RESULT, run
+from altfuse.fuse.smoother.passes import FOR_EM, FOR_RESULT, HEIGHT_ONLY, run
 from altfuse.fuse.smoother.velocity import VELOCITY_NAME, checked_velocity, lag_regressor
 from altfuse.memory import release_free_memory
 from altfuse.model import FloatArray, Samples
@@ -275,6 +281,8 @@ NIS_CHECK = 2.0
 #: 0.90-0.99 on 76 with 5 ms, below on 33 (92 and 45 with 4 ms), the least coverage the
 #: hovers' with their barometer 7 % high either way.
 TIMING_SIGMA_S = 0.005
+#: A refused sample's variance in :func:`scale_response`'s pass, whose gate is open: no weight.
+REFUSED_VARIANCE = 1e30
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -386,13 +394,13 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     xs, var_h, gain_h = out["x"], out["var_h"], out["gain_h"]  # the states at the ticks
     series = [*enumerate(names)] + ([(VELOCITY, VELOCITY_NAME)] if velocity is not None else [])
     nis, rejected = _innovation_checks(out, who, series)
+    # the barometers' scale error nothing in the log pins, as the smoothed height follows it
+    scales = unpinned_scales(kinds, inputs.scale_known, inputs.scale_unknown, layout)
+    if scales.any():
+        var_h = var_h + scale_response(ev, noise.r(who), layout, out["accepted"], scales) ** 2
     del out  # the events' states, before the result's arrays
     release_free_memory()
     weights, valid = contributions(who, gain_h, inputs.z)
-    # the barometers' scale error nothing in the log pins, at the height, by their share
-    scales = unpinned_scales(kinds, inputs.scale_known, inputs.scale_unknown, layout)
-    if scales.any():
-        var_h = var_h + (xs[:, 0] * (np.nan_to_num(weights) @ scales)) ** 2
     n_valid = np.isfinite(inputs.z).sum(axis=1)
     status = np.where(n_valid == 1, SINGLE, np.where(valid, FUSED, NONE))
     return FusionResult(
@@ -456,6 +464,34 @@ def _smoothed(
         keep = FOR_RESULT if k == EM_PASSES - 1 else FOR_EM
         out = run(ev, noise.r(ev.who), layout, keep=keep)
     return ev, out
+
+
+def scale_response(
+    ev: Events, r: FloatArray, layout: Layout, accepted: np.ndarray, scales: FloatArray
+) -> FloatArray:
+    """How far the smoothed height at each tick moves for the barometers' scale errors
+    ``scales`` (per sensor, 0 for the others; each barometer reading ``(1 + e) h``): the
+    smoother's response to their samples' heights times them alone, every other sample and the
+    accelerometer 0, with the variances ``r``, the model ``layout`` and the samples
+    ``accepted`` of the pass it answers for (given them the filter and the smoother are linear:
+    one more pass). One error for every barometer: most of a barometer's scale error is the
+    air's (its temperature against the standard atmosphere's), the same for each of them.
+
+    A scale error is a slow one, and the smoothed height's level follows the sensors whose
+    offsets the model holds steadiest, not those with the largest gain on it: beside a GPS
+    sampled at 5 Hz a barometer's share of the gain is a tenth, while the height follows its
+    level (a real log, its barometer 1.3 m above its GPS at 9 m: response 0.6 of it)."""
+    sensors = np.maximum(ev.who, 0)
+    perturbed = replace(
+        ev,
+        z=np.where(ev.who >= 0, scales[sensors] * ev.z, 0.0),
+        a=np.zeros_like(ev.a),
+        gate=math.inf,
+        h0=0.0,
+    )
+    # a sample the pass refused says nothing here either
+    variances = np.where(accepted | (ev.who == TICK), r, REFUSED_VARIANCE)
+    return np.asarray(run(perturbed, variances, layout, keep=HEIGHT_ONLY)["x"][:, 0])
 
 
 def _innovation_checks(

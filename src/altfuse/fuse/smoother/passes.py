@@ -86,6 +86,8 @@ class Keep:
 EVERYTHING = Keep()
 FOR_EM = Keep(states=(0, 1, 2), var_h=False, verdicts=frozenset())
 FOR_RESULT = Keep(ticks=True, rows=False, verdicts=frozenset(("gain_h", "nu")))
+#: A response pass (:func:`altfuse.fuse.smoother.scale_response`): h at the ticks.
+HEIGHT_ONLY = Keep(states=(0,), ticks=True, var_h=False, rows=False, verdicts=frozenset())
 #: The verdicts of a forward pass alone (:func:`likelihood`).
 LIKELIHOOD = Keep(verdicts=frozenset(("loglik",)))
 
