@@ -289,6 +289,16 @@ def _climb_at_two_rates(kinds: tuple[SensorKind, SensorKind]) -> FusionInput:
     return replace(inputs, samples=(Samples(t[::2], z[::2, 0]), inputs.samples[1]))
 
 
+def test_a_sensor_sampled_at_half_the_clock_keeps_its_weight_between_its_samples() -> None:
+    """A GPS at 5 Hz beside a barometer at 10 Hz: the weights are each sensor's gain per second
+    around the tick, not the gain of the samples since the previous tick (which gave the GPS
+    most of the weight at the ticks with its sample and none at the others)."""
+    result = fuse_smoother(_climb_at_two_rates(("gps", "baro")), SmootherParams())
+    gps = result.weights[220:380, 0]  # the steady climb, away from its corners
+    assert np.max(np.abs(np.diff(gps))) < 0.1  # 0.054; 0.71 by the gain since the last tick
+    assert 0.2 < np.median(gps) < 0.8
+
+
 @pytest.mark.parametrize("kinds", [("baro", "baro"), ("gps", "baro")])
 def test_a_barometer_scale_nothing_pins_widens_the_band_as_the_height_follows_it(
     kinds: tuple[SensorKind, SensorKind],

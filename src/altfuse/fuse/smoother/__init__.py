@@ -158,7 +158,8 @@ the smoothed climb rate; also the barometers' scale error that nothing pins,
 :func:`.model.unpinned_scales`, in a log without GPS or where the fit against the GPS cannot
 tell it to within 5 %, as far as the smoothed height follows it, :func:`scale_response`), the
 velocity, bias and each sensor's offset (or ground height), and each sensor's contribution: the
-share, per tick, of the total Kalman gain on ``h`` that its accepted samples carried. In the
+share, per tick, of the total Kalman gain on ``h`` that its accepted samples carried around it
+(over whole cycles of the slowest sensor's sampling, :func:`.events.contributions`). In the
 metadata, the model's own check per sensor: ``nis_<sensor>``, the mean squared normalised
 innovation ``y^2 / S`` of its accepted samples (1 where the model's noises are right), and
 ``model_check``: failed where one averages above ``NIS_CHECK`` (the commands warn). It does
@@ -400,7 +401,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         var_h = var_h + scale_response(ev, noise.r(who), layout, out["accepted"], scales) ** 2
     del out  # the events' states, before the result's arrays
     release_free_memory()
-    weights, valid = contributions(who, gain_h, inputs.z)
+    weights, valid = contributions((times, who, gain_h), inputs.z, inputs.dt_s)
     n_valid = np.isfinite(inputs.z).sum(axis=1)
     status = np.where(n_valid == 1, SINGLE, np.where(valid, FUSED, NONE))
     return FusionResult(

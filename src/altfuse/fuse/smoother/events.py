@@ -50,25 +50,34 @@ def interval_mean(series: Samples, t: FloatArray) -> FloatArray:
 
 
 def contributions(
-    who: np.ndarray, gain_h: FloatArray, z: FloatArray
+    events: tuple[FloatArray, np.ndarray, FloatArray], z: FloatArray, dt_s: float
 ) -> tuple[FloatArray, np.ndarray]:
-    """Each sensor's share per tick of the gain on h its samples carried since the previous tick
-    (summing to 1 over the sensors present at the tick), and which ticks have a sensor."""
-    m = z.shape[1]
-    tick = who == -1
-    idx_tick = np.flatnonzero(tick)
-    cum = np.zeros((who.size + 1, m))
-    for i in range(m):
-        cum[1:, i] = np.cumsum(np.where(who == i, gain_h, 0.0))
-    bounds = np.concatenate(([0], idx_tick[:-1] + 1))
-    share = cum[idx_tick + 1] - cum[bounds]
+    """Each sensor's share per tick of the gain on h its accepted samples carried around the
+    tick (summing to 1 over the sensors present at the tick), and which ticks have a sensor.
+
+    ``events`` are the events' times, series (:func:`merge_events`) and gains on h. The gains
+    are summed under a triangle centred on the tick, its half-width the longest of the
+    sensors' median sampling intervals (at least the tick ``dt_s``), so that each sensor's
+    sum holds whole cycles of every other's: from the samples since the previous tick, a GPS
+    sampled at 5 Hz beside a barometer at 10 Hz took most of the weight at the ticks with its
+    sample and none at the others (on the shared logs the weights swung by more than 0.5 from
+    one tick to the next on 56-99 % of the ticks of 17 logs of 34)."""
+    times, who, gain_h = events
+    ticks = times[who == TICK]
+    mine = [who == i for i in range(z.shape[1])]
+    steps = [float(np.median(np.diff(times[m]))) for m in mine if m.sum() > 1]
+    width = max([dt_s, *steps])
+    rate = np.zeros((ticks.size, z.shape[1]))
+    for i, m in enumerate(mine):
+        if m.any():
+            ts = times[m]
+            rate[:, i] = _triangle_sums(ts - ts[0], gain_h[m], ticks - ts[0], width)
     valid = np.asarray(np.isfinite(z).any(axis=1))
-    total = share.sum(axis=1, keepdims=True)
+    total = rate.sum(axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
-        weights = np.where(total > 0, share / total, np.nan)
-    # a tick with no update since the previous one keeps the previous contributions: each
-    # tick takes the row of the last tick up to it whose row is whole (the first tick's own
-    # row if none is)
+        weights = np.where(total > 0, rate / total, np.nan)
+    # a tick no sample reaches keeps the previous contributions: each tick takes the row of
+    # the last tick up to it whose row is whole (the first tick's own row if none is)
     whole = np.isfinite(weights).all(axis=1)
     weights = weights[np.maximum.accumulate(np.where(whole, np.arange(whole.size), 0))]
     # a sensor absent from the clock at a tick (a gap longer than --max-gap) gets no weight there,
@@ -80,3 +89,19 @@ def contributions(
     with np.errstate(invalid="ignore", divide="ignore"):
         weights = np.where(total > 0, weights / total, even)
     return np.asarray(np.where(valid[:, None], weights, np.nan)), valid
+
+
+def _triangle_sums(t: FloatArray, g: FloatArray, at: FloatArray, width: float) -> FloatArray:
+    """At each time of ``at``: the sum of ``g`` over the times ``t`` (sorted) under a triangle
+    of half-width ``width`` centred there, ``sum g_k (1 - |t_k - a| / width)``; by cumulative
+    sums of ``g`` and ``g t``, linear in the sizes."""
+    gs = np.concatenate(([0.0], np.cumsum(g)))
+    gts = np.concatenate(([0.0], np.cumsum(g * t)))
+    lo = np.searchsorted(t, at - width, side="right")
+    mid = np.searchsorted(t, at, side="right")
+    hi = np.searchsorted(t, at + width, side="left")
+    before, after = gs[mid] - gs[lo], gs[hi] - gs[mid]
+    # behind: g (1 - (a - t) / width); ahead: g (1 - (t - a) / width)
+    behind = before - (at * before - (gts[mid] - gts[lo])) / width
+    ahead = after - ((gts[hi] - gts[mid]) - at * after) / width
+    return np.asarray(behind + ahead)
