@@ -189,6 +189,24 @@ def test_a_drifting_barometer_gets_a_drift_rate(
         assert params.get("baro_drift_loglik_gain", -1.0) < DRIFT_GAIN
 
 
+def test_a_gps_that_ramps_away_from_two_barometers_is_not_followed_by_their_drift() -> None:
+    """Two barometers agree; the GPS ramps away at 0.1 m/s. Offered a drift rate, the
+    barometers took the GPS's ramp (a gain of 947) and the height went 15 m astray; the GPS's own
+    drift explains the log better (985), and the barometers are not made to drift."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 150.0, 0.1)
+    truth = 10 * (1 - np.cos(2 * np.pi * t / 75))
+    z = truth[:, None] + rng.normal(0.0, [0.05, 0.1, 0.1], (t.size, 3))
+    z[:, 0] += 0.1 * t
+    climb = np.gradient(np.gradient(truth, t), t)
+    inputs = FusionInput.from_heights(z, 0.1, kinds=("gps", "baro", "baro"), accel_up=climb)
+    result = fuse_smoother(inputs, SmootherParams())
+    assert result.params["baro_drift"].startswith("not modelled (the GPS's own drift")
+    assert result.params["gps_drift_loglik_gain"] > result.params["baro_drift_loglik_gain"]
+    error = result.fused - truth
+    assert np.ptp(error) < 1.0  # 0.34; 14.9 with the drift
+
+
 @pytest.mark.parametrize(("faults", "modelled"), [((), False), (("baro-scale",), True)])
 def test_a_barometer_scale_the_datum_cannot_tell_is_learnt_where_the_log_asks(
     tmp_path: Path, faults: tuple[str, ...], modelled: bool

@@ -119,7 +119,9 @@ From the log itself:
   test at 0.1 %) and rejects no more samples (:func:`.evidence.evidence_gain`). A ramp
   (0.05 m/s) is then told from the GPS's wander even with no third sensor (hover RMSE 2.36 m
   -> 0.23 m), and a barometer that does not drift keeps its stable offset (a drift rate it does
-  not need lets the height wander where GPS and barometer are alone).
+  not need lets the height wander where GPS and barometer are alone). A third pass gives the
+  drift to the GPS receivers instead; where that explains the log at least as well, the
+  barometer's is not modelled (:func:`.evidence.drift_evidence`).
 
 The offsets' random-walk densities are physical defaults (``Q_OFFSET``: a GPS's vertical error
 wanders by about 1 m over 100 s, and no further than its bound, ``GPS_CORRELATION_S``: over hours
@@ -386,7 +388,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     if chosen is None and layout is plain:
         chosen = tested  # the GPS test's pass of this very model, where it ran
     # the forward pass of the layout chosen, where one was made with these noises
-    layout, drift_gain = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
+    layout, drifts = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
     del tested, chosen, r
     release_free_memory()  # the tests' passes, before the smoothing ones
     floor = ev.q_accel
@@ -430,7 +432,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             "gps_correlation_s": params.gps_correlation_s,
             **evidence_record("stable", stable_gain > STABLE_GAIN, stable_gain, sensor="gps"),
             **evidence_record("scale", layout.has("scale"), scale_gain),
-            **evidence_record("drift", bool(layout.drifting), drift_gain),
+            **drifts,
             **evidence_record("thermal", layout.has("thermal"), thermal_gain),
             **_fitted(names, ev, noise, layout, xs[-1]),
             **{f"q_terrain_{name}_m2_m": value for name, value in terrain.items()},

@@ -145,19 +145,39 @@ def drift_evidence(
     layout: Layout,
     kinds: Sequence[str],
     stable: dict[str, np.ndarray] | None,
-) -> tuple[Layout, float]:
+) -> tuple[Layout, dict[str, float | str]]:
     """``layout`` with a drift rate on each barometer's offset where the log's evidence asks
-    for it, and that evidence (NaN without a barometer); ``stable`` is ``layout``'s forward pass
-    if one was already run with these events."""
+    for it, and the test's record for the metadata (nothing without a barometer); ``stable``
+    is ``layout``'s forward pass if one was already run with these events.
+
+    A barometer and a GPS that part slowly tell no more than that one of them drifts. Where the
+    log has a GPS, the drift is offered to its receivers instead, too, and the barometers'
+    is modelled only where it explains the log better than theirs: a receiver powered on
+    before its fix settled climbed 20 m in 150 s against a barometer, a second GPS and a
+    rangefinder that agreed with each other, and the barometer's drift (a gain of 7.4) took
+    the fused height 2 m above all three (the GPS's own: a gain of 214)."""
     if "baro" not in kinds:
-        return layout, math.nan
+        return layout, {}
     drifting = layout.with_drift(kinds)
+    receivers = tuple(i for i, kind in enumerate(kinds) if kind == "gps")
+    models = [(ev, r, drifting)] + [(ev, r, replace(layout, drifting=receivers))] * bool(receivers)
     if stable is None:
-        stable, richer = likelihoods((ev, r, layout), (ev, r, drifting))
+        stable, *passes = likelihoods((ev, r, layout), *models)
     else:
-        richer = likelihood(ev, r, drifting)
-    gain = evidence_gain(stable, richer)
-    return (drifting if gain > DRIFT_GAIN else layout), gain
+        passes = likelihoods(*models)
+    gain = evidence_gain(stable, passes[0])
+    record = evidence_record("drift", False, gain)
+    if len(passes) > 1:
+        rival = evidence_gain(stable, passes[1])
+        if math.isfinite(rival):
+            record["gps_drift_loglik_gain"] = rival  # the rival's, never modelled itself
+        if gain > DRIFT_GAIN and rival >= gain:
+            record["baro_drift"] = "not modelled (the GPS's own drift explains the log as well)"
+            return layout, record
+    if gain > DRIFT_GAIN:
+        record["baro_drift"] = "modelled"
+        return drifting, record
+    return layout, record
 
 
 #: Why a richer model lost outright (a gain of -inf), per test.
