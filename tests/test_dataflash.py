@@ -12,6 +12,7 @@ from altfuse.errors import LogReadError
 from altfuse.io import read_log
 from altfuse.io.dataflash import _Records
 from altfuse.io.fastdf import index_file
+from altfuse.screen import GPS_CONVERGED_VACC_M, NOT_CONVERGED, not_converged
 from altfuse.simulate import simulate_flight, write_simulated_log
 from conftest import SAMPLE_LOG, shared_log
 
@@ -115,8 +116,36 @@ def test_ctun_fallbacks_and_multi_instance_gps() -> None:
     assert set(sources) == {"gps", "gps2", "baro", "rangefinder"}
     assert sources["baro"].source == "CTUN.BAlt"
     assert sources["rangefinder"].source == "RFND.Dist"
-    assert sources["gps"].dropped == {"GPS Status < 3 (no 3D fix)": 43}
+    assert sources["gps"].dropped == {"GPS Status < 3 (no 3D fix)": 43, NOT_CONVERGED: 7}
     assert any("CTUN.BAlt" in note for note in flight.notes)
+
+
+def test_a_gps_is_read_from_when_its_receiver_first_reports_a_converged_fix() -> None:
+    """The log starts as its GPS gets a 3D fix: GPA.VAcc 12.5 m, 7.5 m 2.2 s later. Its
+    samples (and speeds) until then are dropped, counted; the rest are kept, poorer reports
+    later included."""
+    path = shared_log("ardupilot/diaven_sample01.bin")
+    flight = read_log(path)
+    gps = next(s for s in flight.sensors if s.name == "gps")
+    accuracy = pymavlink_records(path, "GPA", "VAcc")
+    times = np.array(sorted(accuracy))
+    vacc = np.array([accuracy[t][0] for t in times])  # the first instance's record first
+    converged = times[np.argmax(vacc <= GPS_CONVERGED_VACC_M)]
+    assert vacc[0] > 12.0
+    assert converged - times[0] == pytest.approx(2.2, abs=0.1)
+    assert gps.t[0] == converged
+    assert flight.vertical_velocity is not None
+    assert flight.vertical_velocity.t[0] >= converged
+
+
+def test_not_yet_converged_is_between_the_first_report_and_the_first_good_one() -> None:
+    t = np.array([1.0, 2.0, 3.0, 4.0])
+    at = np.array([0.5, 1.0, 2.5, 3.0, 9.0])
+    np.testing.assert_array_equal(
+        not_converged(t, np.array([0.0, 12.0, 7.5, 20.0]), at), [False, False, True, False, False]
+    )  # before any report: unknown, kept; a report of 0: unknown; later poor ones: kept
+    never = not_converged(t, np.full(4, 9.0), at)
+    assert not never.any()  # a receiver poor all flight is not dropped
 
 
 def test_ardusub_baro_instances() -> None:

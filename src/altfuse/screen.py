@@ -109,6 +109,27 @@ MOTION_MIN_M = 1.0
 MOTION_NOISES = 10.0
 
 
+#: A GPS receiver's vertical accuracy [m] by which its fix has converged: ArduPilot's EKF3
+#: uses a GPS only once its receiver reports at most this (and PX4's EKF2 5 m, EKF2_REQ_EPV).
+#: A receiver just powered on reports 10 m or more and walks its height by metres meanwhile
+#: (a shared log: GPA.VAcc 12.5 m falling to 7.5 in 2 s, its height 8 m below the barometer
+#: and back; the smoother took 4 m of it, the autopilot's EKF none).
+GPS_CONVERGED_VACC_M = 7.5
+NOT_CONVERGED = f"GPS fix not yet converged (vertical accuracy over {GPS_CONVERGED_VACC_M:g} m)"
+
+
+def not_converged(t: FloatArray, accuracy: FloatArray, at: FloatArray) -> Mask:
+    """Which times ``at`` lie after a GPS receiver's first accuracy report (``accuracy`` [m],
+    vertical, at times ``t``) and before its first within GPS_CONVERGED_VACC_M. A receiver
+    that never reports one (or reports 0: unknown) loses nothing: a receiver poor all flight
+    is the fusion's to weigh, not the reader's to drop."""
+    known = np.isfinite(t) & np.isfinite(accuracy) & (accuracy > 0)
+    good = known & (accuracy <= GPS_CONVERGED_VACC_M)
+    if not good.any():
+        return np.zeros(at.size, dtype=bool)
+    return np.asarray((at >= t[known].min()) & (at < t[good].min()))
+
+
 def rangefinder_param(params: dict[str, float], name: str, suffix: str) -> float | None:
     """A rangefinder instance's parameter (``RNGFND1_MIN_CM`` for ``rangefinder``,
     ``RNGFND2_...`` for ``rangefinder2``; Copter 3.x names the first ``RNGFND_...``), or None."""

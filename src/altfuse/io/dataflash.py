@@ -57,13 +57,14 @@ from altfuse.model import (
     Vibration,
     usable_series,
 )
+from altfuse.screen import NOT_CONVERGED, not_converged
 
 log = logging.getLogger(__name__)
 
 _SENSOR_TYPES = ("GPS", "GPS2", "GPS3", "BARO", "BAR2", "BAR3", "RFND", "SONR", "CTUN")
 _OTHER_TYPES = (
     "IMU", "ATT", "XKF1", "NKF1", "ORGN", "AHR2", "POS", "SIM", "MSG", "VER", "FMTU", "PARM",
-    "VIBE", "STAT",
+    "VIBE", "STAT", "GPA", "GPA2", "GPA3",
 )  # fmt: skip
 WANTED_TYPES = frozenset(_SENSOR_TYPES + _OTHER_TYPES)
 _UNIT_TYPES = frozenset({"UNIT", "MULT"})  # read with FMTU for the fields' units
@@ -286,6 +287,8 @@ class _Builder:
         self.dropped_sources: dict[str, str] = {}
         self.notes: list[str] = []
         self.temperatures: dict[str, Series] = {}
+        # per GPS type, its records from before its receiver's fix converged
+        self.not_converged: dict[str, npt.NDArray[np.bool_]] = {}
 
     def add(  # noqa: PLR0913 (keyword-only: what one source is, by name)
         self,
@@ -342,11 +345,28 @@ def _add_instances(  # noqa: PLR0913 (what each instance's source is, as add() t
         )
 
 
+def _not_converged(rec: _Records, type_name: str) -> npt.NDArray[np.bool_]:
+    """Per record of ``type_name`` (GPS, GPS2, GPS3): whether its receiver's fix had not yet
+    converged (:func:`altfuse.screen.not_converged`) by the vertical accuracy of its accuracy
+    records (GPA, GPA2, GPA3; by instance ``I`` where both have one)."""
+    out = np.zeros(rec.n(type_name), dtype=bool)
+    accuracy = "GPA" + type_name.removeprefix("GPS")
+    if not rec.timed(type_name) or not rec.timed(accuracy, "VAcc"):
+        return out
+    t, vacc = rec.times(accuracy), rec.column(accuracy, "VAcc")
+    by_instance = rec.has(accuracy, "I") and rec.has(type_name, "I")
+    for inst, sel in _instances(rec, type_name, "I", 0):
+        mine = rec.raw(accuracy, "I") == inst if by_instance else np.ones(t.size, dtype=bool)
+        out[sel] = not_converged(t[mine], vacc[mine], rec.times(type_name)[sel])
+    return out
+
+
 def _read_gps(b: _Builder) -> None:
     for default, type_name in enumerate(("GPS", "GPS2", "GPS3")):
         if not b.rec.timed(type_name, "Alt", "Status"):
             continue
         no_fix = b.rec.raw(type_name, "Status") < 3
+        b.not_converged[type_name] = _not_converged(b.rec, type_name)
         if b.rec.time_field(type_name) == ("T", 1e3):
             b.notes.append(
                 f"{type_name} time from {type_name}.T, the boot time: its TimeMS is the GPS time "
@@ -360,7 +380,10 @@ def _read_gps(b: _Builder) -> None:
             "AMSL",
             instance_field="I",
             default=default,
-            invalid={"GPS Status < 3 (no 3D fix)": no_fix},
+            invalid={
+                "GPS Status < 3 (no 3D fix)": no_fix,
+                NOT_CONVERGED: b.not_converged[type_name],
+            },
         )
 
 
@@ -525,9 +548,12 @@ def _read_references(rec: _Records) -> list[Series]:
     return [c for c in candidates if c is not None]
 
 
-def _read_gps_field(rec: _Records, col: str, sign: float = 1.0) -> Series | None:
+def _read_gps_field(
+    rec: _Records, col: str, not_yet: dict[str, npt.NDArray[np.bool_]], sign: float = 1.0
+) -> Series | None:
     """``sign`` times ``col`` [m/s] of the first GPS instance with a 3D fix: its horizontal
-    speed over ground (``Spd``), or its vertical velocity up (``-VZ``: ArduPilot logs it down)."""
+    speed over ground (``Spd``), or its vertical velocity up (``-VZ``: ArduPilot logs it down);
+    not its records from before its fix converged (``not_yet``, per GPS type)."""
     meaning: dict[str, tuple[str, SeriesKind, str]] = {
         "Spd": ("ground_speed", "speed", "horizontal"),
         "VZ": ("gps_velocity_up", "velocity", "up"),
@@ -537,6 +563,8 @@ def _read_gps_field(rec: _Records, col: str, sign: float = 1.0) -> Series | None
         if not rec.timed(type_name, col, "Status"):
             continue
         select = rec.raw(type_name, "Status") >= 3
+        if type_name in not_yet:
+            select &= ~not_yet[type_name]
         if rec.has(type_name, "I"):
             select &= rec.raw(type_name, "I") == 0
         t, v = rec.times(type_name)[select], sign * rec.column(type_name, col)[select]
@@ -625,6 +653,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     """The flight in ``rec``, the log at ``path`` whose sha256 ``digest`` is computing."""
     b = _Builder(rec)
     _read_gps(b)
+    rec.done("GPA", "GPA2", "GPA3")
     have_baro = _read_baro(b)
     rec.done("BARO", "BAR2", "BAR3")
     have_rangefinder = _read_rangefinder(b)
@@ -640,7 +669,8 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     rec.done("VIBE")
     references = tuple(_read_references(rec))
     rec.done("XKF1", "NKF1", "ORGN", "AHR2", "POS", "CTUN", "SIM")
-    speed, climb = _read_gps_field(rec, "Spd"), _read_gps_field(rec, "VZ", sign=-1.0)
+    speed = _read_gps_field(rec, "Spd", b.not_converged)
+    climb = _read_gps_field(rec, "VZ", b.not_converged, sign=-1.0)
     rec.done("GPS", "GPS2", "GPS3")
     skipped = rec.index.size - rec.index.decoded_bytes
     if skipped:

@@ -53,7 +53,7 @@ from altfuse.model import (
     Series,
     usable_series,
 )
-from altfuse.screen import MAX_BOOT_S
+from altfuse.screen import MAX_BOOT_S, NOT_CONVERGED, not_converged
 
 #: The topics read (pyulog parses no other).
 TOPICS = (
@@ -243,8 +243,13 @@ def _read_gps(topics: _Topics, sensors: _Sensors) -> None:
             sensors.dropped[name] = f"{topic}[{k}] has no altitude field"
             continue
         t, fixed = topics.times(d), d["fix_type"] >= 3
+        settling = np.zeros(t.size, dtype=bool)
+        if "epv" in d:  # the receiver's vertical accuracy [m]
+            settling = not_converged(t, d["epv"].astype(np.float64), t)
         source = f"{topic}[{k}].{column}"
-        sensors.add(name, "gps", source, "AMSL", t, value, {"fix_type < 3": ~fixed})
+        invalid = {"fix_type < 3": ~fixed, NOT_CONVERGED: settling}
+        sensors.add(name, "gps", source, "AMSL", t, value, invalid)
+        fixed &= ~settling
         if k == 0 and "vel_m_s" in d:
             sensors.speed = _series("ground_speed", "speed", f"{topic}[0].vel_m_s", "horizontal",
                                     t, d["vel_m_s"], fixed)  # fmt: skip
