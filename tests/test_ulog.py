@@ -20,6 +20,7 @@ from altfuse.io import read_log
 from altfuse.io.ulog import TOPICS, pressure_altitude
 from altfuse.model import Attitude, Series
 from altfuse.pipeline import FuseOptions, fuse_log, prepare, run_method
+from altfuse.screen import NOT_CONVERGED
 from conftest import SAMPLE_LOG, shared_log
 
 #: Every ULog in ../shared/logs/px4 and what ``altfuse fuse`` makes of it: ok (with the warning
@@ -240,3 +241,32 @@ def test_the_land_detector_holds_a_vehicle_on_the_ground_still() -> None:
     free = run_method(prepare(replace(read_log(path), landed=None), FuseOptions()), FuseOptions())
     loose = free.result.tick_traces["velocity"][20:-20]
     assert np.std(held) < 0.5 * np.std(loose)
+
+
+def test_a_gps_is_read_from_its_first_epv_of_a_converged_fix(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """As for DataFlash logs (GPA.VAcc): a receiver's samples until its first ``epv`` within
+    GPS_CONVERGED_VACC_M are dropped, counted, its velocities too. The log's receiver reports
+    0.7-0.8 m from its first fix on; its first ten reports are made 12 m here."""
+    import pyulog
+
+    class Settling(pyulog.ULog):  # type: ignore[misc]
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            for d in self.data_list:
+                if d.name == "vehicle_gps_position" and d.multi_id == 0:
+                    d.data["epv"] = d.data["epv"].copy()
+                    d.data["epv"][:10] = 12.0
+
+    log = shared_log("px4/px4ulogrs_esc_status_log.ulg")
+    plain = read_log(log)
+    monkeypatch.setattr(pyulog, "ULog", Settling)
+    settled = read_log(log)
+    before = next(s for s in plain.sensors if s.kind == "gps")
+    after = next(s for s in settled.sensors if s.kind == "gps")
+    assert after.dropped == {**before.dropped, NOT_CONVERGED: 10}
+    np.testing.assert_array_equal(after.t, before.t[10:])
+    for speeds in ("vertical_velocity", "ground_speed"):
+        was, now = getattr(plain, speeds), getattr(settled, speeds)
+        np.testing.assert_array_equal(now.t, was.t[was.t >= after.t[0]])
