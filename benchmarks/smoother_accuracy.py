@@ -5,10 +5,12 @@ Run on demand:  python benchmarks/smoother_accuracy.py [--seeds 0 1 2] [--jobs 2
 Flights (``tests/accuracy.py``'s ``flights``): every ``altfuse simulate`` scenario with each seed,
 without fault, with each fault, and the mission with a GPS glitch and a rangefinder dropout
 together. Prints one row per flight (the smoother's RMSE [m], the share of its ticks whose true
-error lies within +-2 sigma, the best other method), and two last lines: on how many flights the
-smoother has the lowest RMSE, and its pooled coverage; the worst case per flight (its largest
-RMSE against the best other method's, its lowest and highest coverage, and on how many flights
-the coverage lies within 0.90-0.99, above, below).
+error lies within +-2 sigma, the best other method), then: on how many flights the smoother
+has the lowest RMSE, and its pooled coverage; the worst case per flight (its largest RMSE
+against the best other method's, its lowest and highest coverage, and on how many flights the
+coverage lies within 0.90-0.99, above, below); and the flights where the guard flagged it
+``diverged``, with its true error at those ticks (where that is small, a false alarm: the guard
+compares with the sensors' raw readings).
 """
 
 from __future__ import annotations
@@ -58,6 +60,22 @@ def main() -> None:
         f"worst RMSE ratio to the best other: {ratio[worst]:.2f} ({worst}); coverage "
         f"{cover[low]:.3f} ({low}) to {cover[high]:.3f} ({high}): within 0.90-0.99 on "
         f"{within}, above on {above}, below on {below}"
+    )
+    # the guard's flags where the truth is known: a flag where the error is small is a false alarm
+    flagged = {name: row for name, row in by_label.items() if row["diverged"]}
+    errors = [row["diverged_error"] for row in flagged.values()]
+    print(
+        f"flagged diverged on {len(flagged)} flights"
+        + (
+            f", the true error at the flagged ticks {min(errors):.2f}-{max(errors):.2f} m"
+            if errors
+            else ""
+        )
+        + "".join(
+            f"\n  {name}: {row['diverged']:.0f} ticks, true error up to "
+            f"{row['diverged_error']:.2f} m"
+            for name, row in flagged.items()
+        )
     )
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from altfuse.evaluation import Evaluation, choose_truth
 from altfuse.fuse import METHODS, FusionResult
+from altfuse.fuse.base import DIVERGED
 from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, Prepared, prepare, run_method
 from altfuse.simulate import (
@@ -67,7 +68,8 @@ def arguments(description: str) -> argparse.ArgumentParser:
 
 def measure(flight: Flight) -> dict[str, float]:
     """Each method's RMSE on one simulated flight, and the smoother's ``inside`` (ticks within
-    +-2 sigma) of ``ticks``."""
+    +-2 sigma) of ``ticks``, its ``diverged`` ticks (the guard's flags) and its largest true
+    error among them (``diverged_error``, 0 without)."""
     prepared = prepared_flight(flight)
     truth = choose_truth(prepared.log, prepared.referred).h
     row: dict[str, float] = {}
@@ -80,6 +82,9 @@ def measure(flight: Flight) -> dict[str, float]:
             std = result.tick_traces["fused_std"][ok]
             row["inside"] = float(np.sum(np.abs(error[ok]) <= 2 * std))
             row["ticks"] = float(ok.sum())
+            flagged = ok & (result.status == DIVERGED)
+            row["diverged"] = float(flagged.sum())
+            row["diverged_error"] = float(np.max(np.abs(error[flagged]), initial=0.0))
     return row
 
 
