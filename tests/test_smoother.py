@@ -22,6 +22,7 @@ from altfuse.evaluation import evaluate
 from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import NIS_CHECK, SmootherParams, fuse_smoother, model_check
 from altfuse.fuse.smoother.compiled import _forget_other_versions
+from altfuse.fuse.smoother.events import _triangle_sums
 from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record
 from altfuse.fuse.smoother.model import (
     GPS_CORRELATION_S,
@@ -322,6 +323,18 @@ def _climb_at_two_rates(kinds: tuple[SensorKind, SensorKind]) -> FusionInput:
     inputs = FusionInput.from_heights(z, 0.1, kinds=kinds, accel_up=np.zeros(t.size))
     # on the clock at every tick (as the spline puts it), sampled at every other
     return replace(inputs, samples=(Samples(t[::2], z[::2, 0]), inputs.samples[1]))
+
+
+def test_the_triangle_sums_are_the_direct_sums() -> None:
+    """The weights' kernel by cumulative sums equals the sum over every sample, at times on,
+    between and beyond the samples."""
+    rng = np.random.default_rng(7)
+    t = np.sort(rng.uniform(0.0, 20.0, 300))
+    g = rng.uniform(0.0, 1.0, t.size)
+    at = np.concatenate([t[::7], rng.uniform(-1.0, 21.0, 50)])
+    width = 0.37
+    direct = [np.sum(g * np.maximum(1.0 - np.abs(t - a) / width, 0.0)) for a in at]
+    np.testing.assert_allclose(_triangle_sums(t, g, at, width), direct, rtol=1e-9, atol=1e-12)
 
 
 def test_a_sensor_sampled_at_half_the_clock_keeps_its_weight_between_its_samples() -> None:
