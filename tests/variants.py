@@ -6,6 +6,8 @@ and alignment:
 - ``no-<kind>``: every source of that kind left out (``gps``, ``baro``, ``rangefinder``);
 - ``no-imu``: the IMU and attitude records left out (the altitude-only model);
 - ``rate-<hz>``: each altitude source kept at most once per 1/hz seconds;
+- ``gps-<hz>``: the GPS alone so, its heights, vertical velocity and speed (a receiver at 1 or
+  2 Hz beside barometers at their own rate);
 - ``spikes-<kind>``: 2 % of that kind's samples moved by 2-20 m up or down (seeded);
 - ``noisy-gps``: each GPS's heights with 0.3 m of white noise and a random walk of 0.01 m^2/s
   (a real receiver's, where the simulators' is centimetres; seeded; ``noisy-<kind>`` the same
@@ -76,6 +78,13 @@ def variant(flight: FlightLog, how: str, seed: int = 1) -> FlightLog:
         return replace(flight, imu=None, attitude=None)
     if what == "no":
         return replace(flight, sensors=tuple(s for s in flight.sensors if s.kind != arg))
+    if what == "gps" and arg:
+        speeds = {
+            field: _thinned(series, rng, arg)
+            for field in ("vertical_velocity", "ground_speed")
+            if (series := getattr(flight, field)) is not None
+        }
+        return replace(_each(flight, "gps", lambda s: _thinned(s, rng, arg)), **speeds)
     if what not in CHANGES or not arg:
         raise ValueError(f"unknown variant {how!r}")
     kinds, change = CHANGES[what]
