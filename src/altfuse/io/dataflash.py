@@ -351,13 +351,13 @@ def _not_converged(rec: _Records, type_name: str) -> npt.NDArray[np.bool_]:
     records (GPA, GPA2, GPA3; by instance ``I`` where both have one)."""
     out = np.zeros(rec.n(type_name), dtype=bool)
     accuracy = "GPA" + type_name.removeprefix("GPS")
-    if not rec.timed(type_name) or not rec.timed(accuracy, "VAcc"):
+    if not rec.timed(accuracy, "VAcc"):
         return out
-    t, vacc = rec.times(accuracy), rec.column(accuracy, "VAcc")
+    t, vacc, at = rec.times(accuracy), rec.column(accuracy, "VAcc"), rec.times(type_name)
     by_instance = rec.has(accuracy, "I") and rec.has(type_name, "I")
     for inst, sel in _instances(rec, type_name, "I", 0):
         mine = rec.raw(accuracy, "I") == inst if by_instance else np.ones(t.size, dtype=bool)
-        out[sel] = not_converged(t[mine], vacc[mine], rec.times(type_name)[sel])
+        out[sel] = not_converged(t[mine], vacc[mine], at[sel])
     return out
 
 

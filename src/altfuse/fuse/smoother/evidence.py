@@ -159,25 +159,23 @@ def drift_evidence(
     if "baro" not in kinds:
         return layout, {}
     drifting = layout.with_drift(kinds)
+    models = [(ev, r, drifting)]
     receivers = tuple(i for i, kind in enumerate(kinds) if kind == "gps")
-    models = [(ev, r, drifting)] + [(ev, r, replace(layout, drifting=receivers))] * bool(receivers)
+    if receivers:
+        models.append((ev, r, replace(layout, drifting=receivers)))
     if stable is None:
         stable, *passes = likelihoods((ev, r, layout), *models)
     else:
         passes = likelihoods(*models)
     gain = evidence_gain(stable, passes[0])
-    record = evidence_record("drift", False, gain)
-    if len(passes) > 1:
-        rival = evidence_gain(stable, passes[1])
-        if math.isfinite(rival):
-            record["gps_drift_loglik_gain"] = rival  # the rival's, never modelled itself
-        if gain > DRIFT_GAIN and rival >= gain:
-            record["baro_drift"] = "not modelled (the GPS's own drift explains the log as well)"
-            return layout, record
-    if gain > DRIFT_GAIN:
-        record["baro_drift"] = "modelled"
-        return drifting, record
-    return layout, record
+    rival = evidence_gain(stable, passes[1]) if receivers else -math.inf
+    modelled = gain > DRIFT_GAIN and rival < gain
+    record = evidence_record("drift", modelled, gain)
+    if math.isfinite(rival):
+        record["gps_drift_loglik_gain"] = rival  # the rival's, never modelled itself
+    if gain > DRIFT_GAIN and not modelled:
+        record["baro_drift"] = "not modelled (the GPS's own drift explains the log as well)"
+    return (drifting if modelled else layout), record
 
 
 #: Why a richer model lost outright (a gain of -inf), per test.
