@@ -46,6 +46,7 @@ from altfuse.align import Aligned, merge_duplicates
 from altfuse.errors import NoUsableSensorsError
 from altfuse.metrics import MAD_TO_SIGMA, running_median
 from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Samples, SensorKind, Series
+from altfuse.steps import Step, find_steps
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
 MIN_WINDOW_TICKS = 3
@@ -193,6 +194,7 @@ class Referred:
     dropped: dict[str, str]
     segments: tuple[Segment, ...] = ()  # empty: the log is one segment
     on_real_ground: bool = False  # the ground window lies before a detected take-off
+    steps: tuple[Step, ...] = ()  # between two sensors' heights (:mod:`altfuse.steps`)
 
     @property
     def datum_windows(self) -> tuple[tuple[float, float] | None, ...]:
@@ -351,7 +353,10 @@ def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what t
         if ticks.size:
             span = (float(ticks[0]), float(ticks[-1]))
             segments.append(Segment(*span, how, grounded, still, offsets))
-    return replace(first, t=t, h=h, segments=tuple(segments))
+    steps = sorted(
+        (s for r in owns.values() if r is not None for s in r.steps), key=lambda s: s.time_s
+    )
+    return replace(first, t=t, h=h, segments=tuple(segments), steps=tuple(steps))
 
 
 def _best_scales(referrals: Sequence[Referred]) -> dict[str, Offset]:
@@ -471,8 +476,13 @@ def _refer_segment(
         window, ground_how, ground_s, ref, dict(clearances or {}), real, takeoff if real else None
     )
     offsets, h, dropped = _refer(aligned, ground, {})
+    referred = sorted(offsets)
+    steps = find_steps(
+        t, h[:, referred], [aligned.names[i] for i in referred],
+        [aligned.kinds[i] for i in referred],
+    )  # fmt: skip
     if referral == "full":
-        scales = baro_scales(aligned, h, offsets)
+        scales = baro_scales(aligned, h, offsets, steps)
         if any(sc.applied for sc in scales.values()):
             offsets, h, dropped = _refer(aligned, ground, scales)
         for i, sc in scales.items():
@@ -497,6 +507,7 @@ def _refer_segment(
         offsets=tuple(offsets[i] for i in keep),
         dropped=dropped,
         on_real_ground=real,
+        steps=steps,
     )
 
 
@@ -553,7 +564,9 @@ def _refer(
     return offsets, h, dropped
 
 
-def baro_scales(aligned: Aligned, h: FloatArray, offsets: dict[int, Offset]) -> dict[int, Scale]:
+def baro_scales(
+    aligned: Aligned, h: FloatArray, offsets: dict[int, Offset], steps: Sequence[Step] = ()
+) -> dict[int, Scale]:
     """Each barometer's scale against the GPS with the most referred ticks, or against the
     rangefinder with the most where that fit's standard error is the smaller (see the module
     doc). The simulators' sonar flights with their GPS left out had scale 1, "not estimated: no
@@ -588,28 +601,39 @@ def baro_scales(aligned: Aligned, h: FloatArray, offsets: dict[int, Offset]) -> 
         }
     return {
         i: min(
-            (_scale(aligned.t, h[:, j], h[:, i], names[j]) for j in references),
+            (
+                _scale(aligned.t, h[:, j], h[:, i], names[j], _between(steps, names[i], names[j]))
+                for j in references
+            ),
             key=lambda sc: math.inf if sc.std is None else sc.std,
         )
         for i in baros
     }
 
 
-def _scale(t: FloatArray, x: FloatArray, y: FloatArray, reference: str) -> Scale:
+def _between(steps: Sequence[Step], a: str, b: str) -> list[float]:
+    """The times [s] of the ``steps`` between sensors ``a`` and ``b``."""
+    return [s.time_s for s in steps if {s.first, s.second} == {a, b}]
+
+
+def _scale(
+    t: FloatArray, x: FloatArray, y: FloatArray, reference: str, steps: Sequence[float] = ()
+) -> Scale:
     """``y = scale x + drift t + b``, the scale and its standard error (see
-    :func:`baro_scales`)."""
+    :func:`baro_scales`); with a free step in ``y - x`` at each of ``steps`` [s]."""
     both = np.isfinite(x) & np.isfinite(y)
     if both.sum() < 2 * SCALE_MIN_CHANGES:
         return Scale(1.0, None, reference, f"not estimated: too few ticks beside {reference}",
                      False)  # fmt: skip
     minutes = (t - t[both][0]) / 60.0
-    levels = np.column_stack([x, minutes, np.ones(t.size)])
+    jumps = [(t > at).astype(np.float64) for at in steps]
+    levels = np.column_stack([x, minutes, np.ones(t.size), *jumps])
     # the GPS's wander correlates the residuals: one independent sample per SCALE_BLOCK_S
     blocks = float(np.ptp(t[both])) / SCALE_BLOCK_S
     fit = _robust_fit(
         levels[both],
         y[both],
-        [math.inf, DRIFT_PRIOR_M_PER_MIN, math.inf],
+        [math.inf, DRIFT_PRIOR_M_PER_MIN, math.inf] + [math.inf] * len(jumps),
         per_independent=both.sum() / max(blocks, 2.0),
     )
     lo, hi = SCALE_SPAN_S
@@ -620,6 +644,9 @@ def _scale(t: FloatArray, x: FloatArray, y: FloatArray, reference: str) -> Scale
     # the same on the changes over successive spans: drift and b become one constant
     dx, dy = x[::k][1:] - x[::k][:-1], y[::k][1:] - y[::k][:-1]
     ok = np.isfinite(dx) & np.isfinite(dy)
+    ends = t[::k]
+    for at in steps:  # a change across a step is no scale's
+        ok &= ~((ends[:-1] < at) & (ends[1:] > at))
     drift_per_span = DRIFT_PRIOR_M_PER_MIN * k * float(t[1] - t[0]) / 60.0
     design = np.column_stack([dx[ok], np.ones(int(ok.sum()))])
     changes = _robust_fit(design, dy[ok], [math.inf, drift_per_span])

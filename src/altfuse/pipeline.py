@@ -259,6 +259,11 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         scale_unknown=tuple(o.scale_unknown for o in referred.offsets),
         scale_known=tuple(o.scale_known for o in referred.offsets),
         landed=_samples(flight.landed),
+        steps=tuple(
+            (s.time_s, (referred.names.index(s.first), referred.names.index(s.second)), s.size_m)
+            for s in referred.steps
+            if s.first in referred.names and s.second in referred.names
+        ),
     )
 
 
@@ -379,6 +384,16 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
             "ground_window_s": list(referred.ground_window_s),
             "segments": [segment_record(s) for s in referred.segments],
             "offsets": [offset_record(o) for o in referred.offsets],
+            # where two sensors' heights jump against each other (altfuse.steps)
+            "steps": [
+                {
+                    "time_s": round(st.time_s, 3),
+                    "between": [st.first, st.second],
+                    "size_m": round(st.size_m, 3),
+                    "sigmas": round(st.sigmas, 1),
+                }
+                for st in referred.steps
+            ],
         },
         "sensors_used": [
             {

@@ -28,6 +28,10 @@ DIVERGED: Final[Status] = "diverged"  # the value left every valid sensor (altfu
 LogInput = Literal["accel"]
 
 
+#: A step between sensors: its time [s], the sensors that may have jumped, the jump [m].
+Jump = tuple[float, tuple[int, ...], float]
+
+
 @dataclass(frozen=True)
 class FusionInput:
     """Everything a method fuses, from one log, on one clock and one datum.
@@ -78,6 +82,11 @@ class FusionInput:
     scale_known
         Per sensor, in ``z``'s order: for a barometer whose scale the datum applied, that scale
         and its standard error (:attr:`altfuse.datum.Offset.scale_known`); None otherwise.
+    steps
+        The instants [s] at which two sensors' heights jump against each other
+        (:mod:`altfuse.steps`): each with the sensors that may have jumped, by their indices
+        in ``z``'s order, and the jump [m]: of the second's heights against the first's, or,
+        where a method found which one jumped, that one alone and its own jump.
     """
 
     t: FloatArray
@@ -98,6 +107,7 @@ class FusionInput:
     scale_unknown: tuple[tuple[float, float] | None, ...] = ()
     scale_known: tuple[tuple[float, float] | None, ...] = ()
     landed: Samples | None = None
+    steps: tuple[Jump, ...] = ()
 
     def __post_init__(self) -> None:
         n = self.z.shape[1] if self.z.ndim == 2 else -1

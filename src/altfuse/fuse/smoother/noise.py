@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from altfuse.fuse.base import FusionInput
+from altfuse.fuse.base import FusionInput, Jump
 from altfuse.fuse.smoother.events import VELOCITY, interval_mean
 from altfuse.fuse.smoother.model import Events
 from altfuse.metrics import (
@@ -36,6 +36,11 @@ Q_OFFSET = {"gps": 0.01, "baro": 1e-4, "rangefinder": 0.3}
 #: ... and of a GPS as stable as a barometer (an RTK fix; a simulator's GPS, which lags but does
 #: not wander): the alternative the log's evidence may choose (:func:`.evidence.gps_evidence`).
 Q_OFFSET_STABLE_GPS = {**Q_OFFSET, "gps": Q_OFFSET["baro"]}
+#: A step between sensors (:mod:`altfuse.steps`) lets the offset of each sensor that may have
+#: jumped jump by this many times the step, one standard deviation, over the events this close
+#: to it [s].
+JUMP_SIGMAS = 3.0
+JUMP_HALF_WIDTH_S = 0.5
 #: Ground height under a moving vehicle: random walk per metre flown [m^2/m] when the log cannot
 #: tell, and its floor in time [m^2/s] (grass, waves: about 3 cm over 100 s).
 Q_TERRAIN_PER_M = 0.05
@@ -335,7 +340,7 @@ def state_noise(
     ranges = [i for i, k in enumerate(kinds) if k == "rangefinder" and names[i] not in given]
     if speed is None or speed.t.size < 2 or not ranges:
         # the same at every event: one row (an event's worth is 12 MB on a 7.4-hour log)
-        return q_time[np.newaxis, :].copy(), terrain
+        return with_jumps(q_time[np.newaxis, :], inputs.steps, times), terrain
     q_events = np.tile(q_time, (times.size, 1))
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.1
     v = Samples(speed.t, np.clip(speed.value, 0.0, MAX_SPEED_M_S))
@@ -356,7 +361,23 @@ def state_noise(
         terrain[names[i]] = q_m
         moving = q_m * speed_events + Q_GROUND_STILL
         q_events[:, i] = np.where(np.isfinite(speed_events), moving, q_time[i])
-    return q_events, terrain
+    return with_jumps(q_events, inputs.steps, times), terrain
+
+
+def with_jumps(q_state: FloatArray, steps: Sequence[Jump], times: FloatArray) -> FloatArray:
+    """The sensor states' random-walk densities ``q_state`` (one row, or one per event at
+    ``times``) with, at each of the ``steps`` between sensors, a jump of each sensor that may
+    have jumped of JUMP_SIGMAS times the step (one standard deviation), spread over the events
+    within JUMP_HALF_WIDTH_S of it."""
+    if not steps:
+        same: FloatArray = q_state.copy()
+        return same
+    out: FloatArray = np.array(np.broadcast_to(q_state, (times.size, q_state.shape[1])))
+    for time, sensors, size in steps:
+        near = np.abs(times - time) <= JUMP_HALF_WIDTH_S
+        for i in sensors:
+            out[near, i] += (JUMP_SIGMAS * size) ** 2 / (2.0 * JUMP_HALF_WIDTH_S)
+    return out
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,88 @@
+"""Steps between two sensors' heights (:mod:`altfuse.steps`): found where they are and as large
+as they are; a ramp, a drift, a real GPS's wander and a spike are none."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from altfuse.model import SensorKind
+from altfuse.steps import STEP_MIN_M, _line_ends, find_steps
+
+KINDS: tuple[SensorKind, SensorKind] = ("gps", "baro")
+
+
+def two_sensors(
+    seed: int = 1, gps_noise: float = 0.1, walk_m2_s: float = 0.0, scale: float = 1.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A 10 Hz clock of 200 s, the truth (a climb to 50 m, a hold, a descent), and the heights
+    of a GPS (white noise, a random walk) and of a barometer ``scale`` times the truth."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 200.0, 0.1)
+    h = np.interp(t, [0, 20, 60, 140, 180, 200], [0, 0, 50, 50, 0, 0])
+    walk = np.cumsum(rng.normal(0.0, np.sqrt(walk_m2_s * 0.1), t.size))
+    gps = h + walk + rng.normal(0.0, gps_noise, t.size)
+    baro = scale * h + rng.normal(0.0, 0.05, t.size)
+    return t, h, np.column_stack([gps, baro])
+
+
+@pytest.mark.parametrize("right", [True, False])
+def test_a_line_s_end_is_its_least_squares_line_at_the_boundary(right: bool) -> None:
+    rng = np.random.default_rng(2)
+    d, n = rng.normal(size=40), 7
+    d[30] = np.nan
+    ends = _line_ends(d, n, right=right)
+    for k in range(d.size):
+        ticks = np.arange(k, k + n) if right else np.arange(k - n, k)
+        if ticks[0] < 0 or ticks[-1] >= d.size or np.isnan(d[ticks]).any():
+            assert np.isnan(ends[k])
+            continue
+        line = np.polyfit(ticks, d[ticks], 1)
+        assert ends[k] == pytest.approx(np.polyval(line, k - 0.5), abs=1e-12)
+
+
+@pytest.mark.parametrize(("which", "size"), [(0, 1.0), (1, -0.8)])
+def test_a_step_is_found_where_and_as_large_as_it_is(which: int, size: float) -> None:
+    t, _, z = two_sensors()
+    z[t >= 100.0, which] += size
+    (step,) = find_steps(t, z, ("gps", "baro"), KINDS)
+    assert step.time_s == pytest.approx(100.0 - 0.05, abs=0.11)
+    assert (step.first, step.second) == ("gps", "baro")
+    # the barometer's heights less the GPS's
+    assert step.size_m == pytest.approx(size if which == 1 else -size, abs=0.05)
+    assert step.sigmas > 10
+
+
+def test_a_scale_a_drift_and_a_real_gps_s_wander_are_no_steps() -> None:
+    """A barometer 5 % high in 50 m climbs, drifting 0.3 m/min, beside a GPS 0.3 m noisy that
+    wanders by a random walk of 0.01 m^2/s (a real receiver's: 1.4 m over the flight)."""
+    for seed in range(5):
+        t, _, z = two_sensors(seed, gps_noise=0.3, walk_m2_s=0.01, scale=1.05)
+        z[:, 1] += 0.3 * t / 60.0
+        assert find_steps(t, z, ("gps", "baro"), KINDS) == ()
+
+
+def test_a_spike_out_and_back_is_no_step_and_a_glitch_is_two() -> None:
+    t, _, z = two_sensors()
+    spiked = z.copy()
+    spiked[(t >= 100.0) & (t < 100.4), 0] += 3.0
+    assert find_steps(t, spiked, ("gps", "baro"), KINDS) == ()
+    glitched = z.copy()
+    glitched[(t >= 100.0) & (t < 105.0), 0] += 15.0
+    first, second = find_steps(t, glitched, ("gps", "baro"), KINDS)
+    assert (first.time_s, second.time_s) == pytest.approx((99.95, 104.95), abs=0.11)
+    assert (first.size_m, second.size_m) == pytest.approx((-15.0, 15.0), abs=0.5)
+
+
+def test_a_rangefinder_s_ground_is_not_a_step_and_gaps_are_not_bridged() -> None:
+    t, _, z = two_sensors()
+    rangefinder = z.copy()
+    rangefinder[t >= 100.0, 1] += 2.0  # a roof under it
+    assert find_steps(t, rangefinder, ("gps", "rangefinder"), ("gps", "rangefinder")) == ()
+    gap = z.copy()
+    gap[(t >= 99.0) & (t < 101.0), 1] = np.nan
+    gap[t >= 100.0, 1] += 1.0
+    assert find_steps(t, gap, ("gps", "baro"), KINDS) == ()  # no whole span at the step
+    small = z.copy()
+    small[t >= 100.0, 1] += 0.9 * STEP_MIN_M
+    assert find_steps(t, small, ("gps", "baro"), KINDS) == ()
