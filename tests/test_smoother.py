@@ -438,6 +438,29 @@ def test_a_step_in_one_sensor_is_that_sensor_s_jump(which: int) -> None:
         assert np.sqrt(np.mean((plain.fused[after] - h[after]) ** 2)) > 0.5
 
 
+def test_a_gps_s_step_against_two_barometers_is_one_jump_of_the_gps() -> None:
+    """Two steps at one instant (the GPS against each barometer): tried one at a time, the
+    first went to the GPS and the second then to a barometer; as one event, the sensor both
+    share jumped, once (its samples moved back by one jump, not two)."""
+    rng = np.random.default_rng(4)
+    dt = 0.1
+    t = np.arange(0.0, 120.0, dt)
+    h = np.interp(t, [0, 20, 40, 120], [0, 0, 30, 30])
+    a = np.gradient(np.gradient(h, dt), dt) + rng.normal(0, 0.05, t.size)
+    z = h[:, None] + rng.normal(0, [0.05, 0.1, 0.1], (t.size, 3))
+    z[t >= 70.0, 0] += 2.0
+    inputs = FusionInput.from_heights(z, dt, kinds=("gps", "baro", "baro"), accel_up=a)
+    steps = find_steps(t, z, inputs.names, inputs.kinds)
+    assert [(s.first, s.second) for s in steps] == [("gps", "baro"), ("gps", "baro2")]
+    jumps = tuple((s.time_s, (0, inputs.names.index(s.second)), s.size_m) for s in steps)
+    res = fuse_smoother(replace(inputs, on_ground_s=((0.0, 18.0),), steps=jumps), SmootherParams())
+    when, size, sensor = re.fullmatch(r"(\S+) s: (\S+) m, (\w+)", str(res.params["steps"])).groups()
+    assert (float(when), sensor) == (69.95, "gps")
+    assert float(size) == pytest.approx(2.0, abs=0.05)
+    after = t >= 70.0
+    assert np.max(np.abs(res.fused[after] - h[after])) < 0.05
+
+
 def test_a_landing_the_accelerometer_did_not_log_is_followed_within_a_second() -> None:
     """Issue 15, item 1: a descent at 0.6 m/s stops on the ground and the logged IMU shows no
     touchdown (a PX4 simulator's landing). GPS and barometer agree against the estimate: let

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from altfuse.model import SensorKind
-from altfuse.steps import STEP_MIN_M, _line_ends, find_steps
+from altfuse.steps import STEP_GAP_S, STEP_MIN_M, _end_error, _line_ends, _step_at, find_steps
 
 KINDS: tuple[SensorKind, SensorKind] = ("gps", "baro")
 
@@ -74,15 +74,49 @@ def test_a_spike_out_and_back_is_no_step_and_a_glitch_is_two() -> None:
     assert (first.size_m, second.size_m) == pytest.approx((-15.0, 15.0), abs=0.5)
 
 
-def test_a_rangefinder_s_ground_is_not_a_step_and_gaps_are_not_bridged() -> None:
+def test_a_rangefinder_s_ground_is_not_a_step_nor_one_under_half_a_metre() -> None:
     t, _, z = two_sensors()
     rangefinder = z.copy()
     rangefinder[t >= 100.0, 1] += 2.0  # a roof under it
     assert find_steps(t, rangefinder, ("gps", "rangefinder"), ("gps", "rangefinder")) == ()
-    gap = z.copy()
-    gap[(t >= 99.0) & (t < 101.0), 1] = np.nan
-    gap[t >= 100.0, 1] += 1.0
-    assert find_steps(t, gap, ("gps", "baro"), KINDS) == ()  # no whole span at the step
     small = z.copy()
     small[t >= 100.0, 1] += 0.9 * STEP_MIN_M
     assert find_steps(t, small, ("gps", "baro"), KINDS) == ()
+
+
+def test_a_step_across_a_gap_is_found_in_its_middle_and_a_long_gap_is_not_bridged() -> None:
+    """A GPS lost for 10 s in the climb and regained 2 m higher (its fix elsewhere), the
+    barometer measuring on; lost for longer than STEP_GAP_S, or both lost, nothing is said."""
+    t, _, z = two_sensors()
+    lost = z.copy()
+    lost[(t >= 40.0) & (t < 50.0), 0] = np.nan
+    lost[t >= 50.0, 0] += 2.0
+    (step,) = find_steps(t, lost, ("gps", "baro"), KINDS)
+    assert step.time_s == pytest.approx(44.95, abs=0.11)
+    assert step.size_m == pytest.approx(-2.0, abs=0.25)  # 0.057 m standard error
+    longer = z.copy()
+    longer[(t >= 40.0) & (t < 40.0 + STEP_GAP_S + 5.0), 0] = np.nan
+    longer[t >= 40.0, 0] += 2.0
+    assert find_steps(t, longer, ("gps", "baro"), KINDS) == ()
+    # nor a pause of the log (both lost): it ends an excursion as often as it starts a level
+    paused = lost.copy()
+    paused[(t >= 40.0) & (t < 50.0), 1] = np.nan
+    assert find_steps(t, paused, ("gps", "baro"), KINDS) == ()
+
+
+@pytest.mark.parametrize("gap", [0, 1, 13])
+def test_a_step_is_two_least_squares_lines_drawn_to_the_gap_s_middle(gap: int) -> None:
+    rng = np.random.default_rng(gap)
+    n, k = 9, 30
+    d = rng.normal(size=60)
+    d[k - gap : k] = np.nan
+    before, after = np.arange(k - gap - n, k - gap), np.arange(k, k + n)
+    middle = (k - gap - 1 + k) / 2
+    expected = np.polyval(np.polyfit(after, d[after], 1), middle) - np.polyval(
+        np.polyfit(before, d[before], 1), middle
+    )
+    assert _step_at(d, k, n, gap) == pytest.approx(expected, abs=1e-12)
+    # its standard deviation per unit noise, by the lines' covariance
+    design = [np.column_stack([np.ones(n), x - middle]) for x in (after, before)]
+    variance = sum(np.linalg.inv(a.T @ a)[0, 0] for a in design)
+    assert _end_error(n, gap) == pytest.approx(np.sqrt(variance), rel=1e-12)

@@ -13,7 +13,9 @@ and alignment:
   (a real receiver's, where the simulators' is centimetres; seeded; ``noisy-<kind>`` the same
   on another kind);
 - ``step-<kind>``: that kind's heights 1 m higher from half-way through each source's span
-  (a GPS's jump when its fix changes, a barometer's step).
+  (a GPS's jump when its fix changes, a barometer's step);
+- ``regain-<kind>``: that kind lost for 10 s from half-way, and 2 m higher once regained (a
+  GPS's fix back elsewhere).
 """
 
 from __future__ import annotations
@@ -53,6 +55,13 @@ def _stepped(s: Series, _rng: np.random.Generator, _: str) -> Series:
     return replace(s, value=s.value + np.where(s.t >= half, 1.0, 0.0))
 
 
+def _regained(s: Series, _rng: np.random.Generator, _: str) -> Series:
+    """Lost for 10 s from half-way through the source's span, and 2 m higher once regained."""
+    half = s.t[0] + 0.5 * (s.t[-1] - s.t[0])
+    keep = (s.t < half) | (s.t >= half + 10.0)
+    return replace(s, t=s.t[keep], value=s.value[keep] + np.where(s.t[keep] >= half, 2.0, 0.0))
+
+
 def _noisy(s: Series, rng: np.random.Generator, _: str) -> Series:
     """0.3 m of white noise and a random walk of 0.01 m^2/s (a real receiver's)."""
     dt = np.maximum(np.diff(s.t, prepend=s.t[0]), 0.0)
@@ -67,6 +76,7 @@ CHANGES: dict[str, tuple[tuple[str, ...] | None, Callable[..., Series]]] = {
     "spikes": (None, _spiked),
     "step": (None, _stepped),
     "noisy": (None, _noisy),
+    "regain": (None, _regained),
 }
 
 

@@ -157,14 +157,15 @@ coefficient (0.24 m/degC against 0.12), and every height after the rangefinder w
 Steps: where two sensors' heights jump against each other (:mod:`altfuse.steps`, found on the
 clock before referral), neither a random walk nor the gate takes it: the smoother followed a
 barometer stepped 1 m beside a GPS it holds to wander (the simulators' hexacopter: 1.06 m RMSE
-against the GPS's 0.008), or gated a stepped GPS out for the rest of the flight. Each step is
-tried as either sensor's jump (:func:`.evidence.jump_evidence`: the accelerometer holds the
-height through it, and any third sensor); the one whose samples are the likelier is taken,
-its samples after the step moved back by it and its offset let jump (``JUMP_SIGMAS`` times the
-step over ``JUMP_HALF_WIDTH_S``); where neither is, both offsets may jump. Recorded as
-``steps`` (time, the jump, whose). On the truth logs with one sensor stepped 1 m half-way,
-within the bar on 9 and 13 of 13 (barometer, GPS) where it was 7 and 12; the logs without a step
-unchanged.
+against the GPS's 0.008), or gated a stepped GPS out for the rest of the flight. Each step (or
+the steps at one instant, as one event) is tried as either sensor's jump
+(:func:`.evidence.jump_evidence`: the accelerometer holds the height through it, and any third
+sensor); the one whose samples are the likelier is taken, its samples after the step moved back
+by it and its offset let jump (``JUMP_SIGMAS`` times the step over ``JUMP_HALF_WIDTH_S``);
+where neither is, both offsets may jump. Recorded as ``steps`` (time, the jump, whose). On the
+truth logs with one sensor stepped 1 m half-way, within the bar on 9 and 13 of 13 (barometer,
+GPS) where it was 7 and 12; lost for 10 s and regained 2 m higher, 11 and 12 where it was 6
+and 11; the logs without a step unchanged.
 
 Outputs: the smoothed height at the clock's ticks, its standard deviation (``fused_std``: the
 model's, and the sensors' common latency behind the log's timestamps, ``TIMING_SIGMA_S``, times

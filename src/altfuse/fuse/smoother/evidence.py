@@ -54,6 +54,7 @@ STABLE_GAIN = 3.0
 #: tested, the largest first (the others: either sensor's).
 JUMP_GAIN = 3.0
 JUMP_TESTS = 8
+JUMP_TOGETHER_S = 1.0
 #: The richer model may reject this share more of the samples (the temperature model of the
 #: sample mission rejects 2 of 5,371 more, and explains the rest by 25 in log-likelihood).
 EVIDENCE_SLACK = 1e-3
@@ -238,30 +239,73 @@ def relearnt_scales(
 def jump_evidence(
     ev: Events, r: FloatArray, layout: Layout, steps: Sequence[Jump]
 ) -> tuple[Jump, ...]:
-    """The ``steps`` between two sensors, each given to the one sensor that jumped where the
-    log's evidence tells (``ev``'s offsets' densities without the jumps).
+    """The ``steps`` between two sensors (by time), each given to the one sensor that jumped
+    where the log's evidence tells (``ev``'s offsets' densities without the jumps).
 
     Either sensor's offset may jump at a step, and the accelerometer, which holds the height
     through it, would tell which: but while both offsets are loose the height is held by the
     accelerometer alone, and a simulator's 305 m climb with its GPS stepped 1 m took 0.096 m
-    RMSE (0.012 with the step the GPS's; 0.018 with the GPS gated out after it). Each step (the
-    JUMP_TESTS largest) is tried as either sensor's jump, the other steps as they stand, and
-    goes to the one whose samples' log-likelihood is JUMP_GAIN higher (:func:`evidence_gain`:
-    over the samples both accept, and no more of them rejected), with that sensor's own jump;
-    else it stays with both.
+    RMSE (0.012 with the step the GPS's; 0.018 with the GPS gated out after it). Steps within
+    JUMP_TOGETHER_S of each other are one event: a GPS's jump is a step against each barometer
+    (tried one at a time, the first went to the GPS and the second then to a barometer, whose
+    samples were moved 1.9 m). Each event (the JUMP_TESTS largest) is tried as the jump of the
+    sensor its steps share, or of each step's other sensor (for one step, of either), the
+    other events as they stand, and goes to the one whose samples' log-likelihood is JUMP_GAIN
+    higher (:func:`evidence_gain`: over the samples both accept, and no more of them
+    rejected), each sensor with its own jump; else it stays with both.
     """
-    chosen = list(steps)
-    for k in sorted(range(len(steps)), key=lambda k: -abs(steps[k][2]))[:JUMP_TESTS]:
-        time, sensors, size = chosen[k]
-        if len(sensors) != 2:
+    events = _together(steps)
+    chosen = [[steps[k] for k in event] for event in events]
+    order = sorted(range(len(events)), key=lambda e: -max(abs(steps[k][2]) for k in events[e]))
+    for e in order[:JUMP_TESTS]:
+        options = _options(chosen[e])
+        if not options:
             continue
         trials = []
-        for sensor in sensors:
-            trial = [*chosen[:k], (time, (sensor,), size), *chosen[k + 1 :]]
-            trials.append((replace(ev, q_state=with_jumps(ev.q_state, trial, ev.t)), r, layout))
-        first, second = likelihoods(*trials)
-        if evidence_gain(first, second) > JUMP_GAIN:
-            chosen[k] = (time, (sensors[1],), size)
-        elif evidence_gain(second, first) > JUMP_GAIN:
-            chosen[k] = (time, (sensors[0],), -size)  # the first's jump, against the second
-    return tuple(chosen)
+        for option in options:
+            trial = [*chosen[:e], option, *chosen[e + 1 :]]
+            flat = [jump for jumps in trial for jump in jumps]
+            trials.append((replace(ev, q_state=with_jumps(ev.q_state, flat, ev.t)), r, layout))
+        a, b = likelihoods(*trials)
+        if evidence_gain(b, a) > JUMP_GAIN:
+            chosen[e] = options[0]
+        elif evidence_gain(a, b) > JUMP_GAIN:
+            chosen[e] = options[1]
+    return tuple(jump for jumps in chosen for jump in jumps)
+
+
+def _options(event: Sequence[Jump]) -> list[list[Jump]]:
+    """The two readings of an event's steps (each between two sensors): one step as its first
+    sensor's jump or its second's; several as one jump of the sensor they share (their mean,
+    once: a GPS's jump against two barometers is one jump) or each other sensor's; none where
+    they share no one sensor or one was already given."""
+    pairs = [sensors for _, sensors, _ in event]
+    shared = set.intersection(*(set(p) for p in pairs))
+    if any(len(p) != 2 for p in pairs):
+        return []
+    if len(event) == 1:
+        return [[_own(event[0], pairs[0][0])], [_own(event[0], pairs[0][1])]]
+    if len(shared) != 1:
+        return []
+    (one,) = shared
+    jumps = [_own(step, one)[2] for step in event]
+    common: Jump = (event[0][0], (one,), float(np.mean(jumps)))
+    return [[common], [_own(step, next(s for s in step[1] if s != one)) for step in event]]
+
+
+def _together(steps: Sequence[Jump]) -> list[list[int]]:
+    """The ``steps`` (by time) grouped into events: each within JUMP_TOGETHER_S of the last."""
+    events: list[list[int]] = []
+    for k, step in enumerate(steps):
+        if events and step[0] - steps[events[-1][-1]][0] <= JUMP_TOGETHER_S:
+            events[-1].append(k)
+        else:
+            events.append([k])
+    return events
+
+
+def _own(step: Jump, sensor: int) -> Jump:
+    """``step`` (between two sensors, the second's jump against the first's) as ``sensor``'s
+    own jump."""
+    time, sensors, size = step
+    return (time, (sensor,), size if sensor == sensors[1] else -size)
