@@ -6,8 +6,8 @@ Run on demand:  python benchmarks/variant_logs.py [--shared ../shared/logs] [--j
 [--variants no-gps no-baro no-imu rate-5 spikes-baro spikes-gps noisy-gps step-gps]
 
 The variants (``tests/variants.py``, which the tests use too): ``no-<kind>``, ``no-imu``,
-``rate-<hz>``, ``gps-<hz>``, ``spikes-<kind>``, ``noisy-<kind>``, ``step-<kind>`` (``gps-<hz>``
-and ``step-<kind>`` not in the default set).
+``rate-<hz>``, ``gps-<hz>``, ``spikes-<kind>``, ``noisy-<kind>``, ``step-<kind>``,
+``regain-<kind>`` (``gps-<hz>``, ``step-<kind>`` and ``regain-<kind>`` not in the default set).
 
 Per log and variant: the smoother's RMSE, maximum error and +-2 sigma coverage against
 ``SIM.Alt``, the checks of the project's bar it fails (``tests/accuracy.py``'s ``verdict``;

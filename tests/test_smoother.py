@@ -45,9 +45,10 @@ from altfuse.fuse.smoother.noise import (
     wander_bound,
 )
 from altfuse.fuse.smoother.passes import LOCKOUT_S
+from altfuse.io import read_log
 from altfuse.model import Samples, SensorKind
 from altfuse.params import InvalidParameter
-from altfuse.pipeline import FuseOptions, fuse_log, prepare_log, run_method
+from altfuse.pipeline import FuseOptions, fuse_log, prepare, prepare_log, run_method
 from altfuse.simulate import simulate_flight, write_simulated_log
 from altfuse.steps import find_steps
 from conftest import ROOT, shared_log
@@ -459,6 +460,25 @@ def test_a_gps_s_step_against_two_barometers_is_one_jump_of_the_gps() -> None:
     assert float(size) == pytest.approx(2.0, abs=0.05)
     after = t >= 70.0
     assert np.max(np.abs(res.fused[after] - h[after])) < 0.05
+
+
+@pytest.mark.parametrize("stepped", ["gps", "gps2", "baro"])
+def test_a_real_log_s_sensor_stepped_2_m_is_its_jump_beside_the_others(stepped: str) -> None:
+    """A real log with two GPS receivers and a barometer, one of them 2 m higher from 80 s on.
+    Both offsets loose where the likelihood did not tell (a GPS's step against the other GPS
+    and the barometer): the fused height moved 0.30 m; gated before steps were sought (the
+    GPS's: 0.008 m; the barometer's: 0.76 m); now the sensor the others agree moved (0.002 m;
+    the barometer's 0.37: its level, which held the height, is lost at its jump)."""
+    flight = read_log(shared_log("ardupilot/diaven_sample01.bin"))
+    plain = run_method(prepare(flight, FuseOptions()), FuseOptions()).result.fused
+    sensors = tuple(
+        replace(s, value=s.value + np.where(s.t >= 80.0, 2.0, 0.0)) if s.name == stepped else s
+        for s in flight.sensors
+    )
+    run = run_method(prepare(replace(flight, sensors=sensors), FuseOptions()), FuseOptions())
+    assert str(run.result.params["steps"]).endswith(f" m, {stepped}")
+    moved = run.result.fused - plain
+    assert np.sqrt(np.nanmean(moved**2)) < (0.5 if stepped == "baro" else 0.02)
 
 
 def test_a_landing_the_accelerometer_did_not_log_is_followed_within_a_second() -> None:

@@ -113,7 +113,7 @@ def _steps(
         if not candidate.any():
             break
         k = int(np.argmax(np.where(candidate, best, 0.0)))
-        # its size over the shortest span that has it: the longer ones reach the next step
+        # its size over the span that reads it best and has it (:func:`_sizes`)
         jump = next(x for x in (*_sizes(d, dt, k), size[k]) if math.isfinite(x))
         # the boundary: half-way from the last valid tick before k (a gap's middle)
         before = valid[np.searchsorted(valid, k) - 1] if valid[0] < k else k - 1
