@@ -458,7 +458,9 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             **rejected,
             **nis,
             "model_check": model_check(nis),
-            # each step between two sensors (altfuse.steps) and whose jump the smoother made it
+            # each step between two sensors (altfuse.steps) and whose jump the smoother made it:
+            # "t s: +x m, gps" (the GPS jumped x), "t s: +x m, gps or baro" (the barometer's
+            # heights less the GPS's jumped x, either may have)
             "steps": "; ".join(
                 f"{time:.2f} s: {size:+.2f} m, {' or '.join(names[i] for i in sensors)}"
                 for time, sensors, size in inputs.steps
