@@ -274,6 +274,20 @@ def test_info_text_and_json() -> None:
     assert [r["name"] for r in data["references"]] == ["sim"]
 
 
+def test_info_shows_the_steps_between_sensors() -> None:
+    """The sample flight with faults: its GPS's 15 m glitch, in and out, two steps."""
+    faults = str(Path(SAMPLE_LOG).with_name("mission_faults.bin"))
+    result = run("info", faults)
+    assert result.exit_code == 0
+    lines = [line.strip() for line in result.stdout.splitlines() if "step at" in line]
+    assert lines == [
+        "step at 101.85 s: baro less gps -13.62 m (70 sigma)",
+        "step at 106.95 s: baro less gps +14.00 m (59 sigma)",
+    ]
+    steps = json.loads(run("info", faults, "--json").stdout)["datum"]["steps"]
+    assert [s["between"] for s in steps] == [["gps", "baro"]] * 2
+
+
 def test_info_on_a_bad_file(tmp_path: Path) -> None:
     assert_one_line_error(run("info", bad_inputs(tmp_path)["text"]), 1, "not a DataFlash log")
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from altfuse.errors import AltfuseError
 from altfuse.model import FlightLog, Series
-from altfuse.pipeline import FuseOptions, Prepared, prepare, segment_record
+from altfuse.pipeline import FuseOptions, Prepared, prepare, segment_record, step_record
 from altfuse.screen import implausible_count, screen, screened_out
 
 #: A pause between two samples longer than this counts as a gap [s].
@@ -91,11 +91,13 @@ def describe(raw: FlightLog) -> dict[str, Any]:
 
 
 def describe_datum(prepared: Prepared) -> dict[str, Any]:
-    """Each source's lag, offset and scale, the take-off and the segments."""
+    """Each source's lag, offset and scale, the take-off, the segments and the steps between
+    sensors."""
     referred = prepared.referred
     return {
         "takeoff_s": referred.takeoff_s,
         "segments": [segment_record(s) for s in referred.segments],
+        "steps": [step_record(s) for s in referred.steps],
         "sensors": [
             {
                 "name": o.name,
@@ -156,5 +158,10 @@ def _datum_text(datum: dict[str, Any]) -> list[str]:
     lines += [
         f"  segment {s['start_s']:.1f}-{s['end_s']:.1f} s: datum {s['datum']}"
         for s in datum["segments"]
+    ]
+    lines += [
+        f"  step at {s['time_s']:.2f} s: {s['between'][1]} less {s['between'][0]} "
+        f"{s['size_m']:+.2f} m ({s['sigmas']:.0f} sigma)"
+        for s in datum["steps"]
     ]
     return lines

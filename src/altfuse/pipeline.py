@@ -31,6 +31,7 @@ from altfuse.memory import release_free_memory
 from altfuse.model import FlightLog, Samples, Series
 from altfuse.params import Params, param, validate
 from altfuse.screen import rangefinder_param, screen
+from altfuse.steps import Step
 
 log = logging.getLogger(__name__)
 #: What a run is doing now, for a progress line (``altfuse fuse`` on a terminal) or ``-v``.
@@ -350,6 +351,16 @@ def segment_record(segment: Segment) -> dict[str, Any]:
     return {**asdict(segment), "offsets": [offset_record(o) for o in segment.offsets]}
 
 
+def step_record(step: Step) -> dict[str, Any]:
+    """A step between two sensors' heights (:mod:`altfuse.steps`), for the provenance."""
+    return {
+        "time_s": round(step.time_s, 3),
+        "between": [step.first, step.second],
+        "size_m": round(step.size_m, 3),
+        "sigmas": round(step.sigmas, 1),
+    }
+
+
 def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
     """How the output was made: enough to reproduce it and to judge it."""
     flight, aligned, referred = prepared.log, prepared.aligned, prepared.referred
@@ -385,15 +396,7 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
             "segments": [segment_record(s) for s in referred.segments],
             "offsets": [offset_record(o) for o in referred.offsets],
             # where two sensors' heights jump against each other (altfuse.steps)
-            "steps": [
-                {
-                    "time_s": round(st.time_s, 3),
-                    "between": [st.first, st.second],
-                    "size_m": round(st.size_m, 3),
-                    "sigmas": round(st.sigmas, 1),
-                }
-                for st in referred.steps
-            ],
+            "steps": [step_record(st) for st in referred.steps],
         },
         "sensors_used": [
             {
