@@ -10,30 +10,22 @@ Run on demand:  python benchmarks/step_robustness.py [--shared ../shared/logs] [
 from __future__ import annotations
 
 import argparse
+import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from altfuse.errors import AltfuseError
-from altfuse.io import read_log
-from altfuse.model import FlightLog
-from altfuse.pipeline import FuseOptions, prepare, run_method
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from altfuse.errors import AltfuseError  # noqa: E402
+from altfuse.io import read_log  # noqa: E402
+from altfuse.pipeline import FuseOptions, prepare, run_method  # noqa: E402
+from variants import stepped  # noqa: E402 (tests/variants.py: the tests' step, any size)
+
 SIZES_M = (2.0, 3.0)
-
-
-def stepped(flight: FlightLog, name: str, size: float) -> FlightLog:
-    """``flight`` with sensor ``name``'s heights ``size`` higher from half-way on."""
-    sensors = []
-    for s in flight.sensors:
-        if s.name == name:
-            half = s.t[0] + 0.5 * (s.t[-1] - s.t[0])
-            s = replace(s, value=s.value + np.where(s.t >= half, size, 0.0))
-        sensors.append(s)
-    return replace(flight, sensors=tuple(sensors))
 
 
 def measure(path: Path) -> list[str]:
@@ -49,7 +41,8 @@ def measure(path: Path) -> list[str]:
         if sensor.kind == "rangefinder":
             continue
         for size in SIZES_M:
-            changed = prepare(stepped(flight, sensor.name, size), FuseOptions())
+            one = tuple(stepped(s, size) if s is sensor else s for s in flight.sensors)
+            changed = prepare(replace(flight, sensors=one), FuseOptions())
             run = run_method(changed, FuseOptions())
             # on the ticks of both clocks (a sensor's span can move the clock's start)
             _, mine, theirs = np.intersect1d(

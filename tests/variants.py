@@ -49,17 +49,21 @@ def _spiked(s: Series, rng: np.random.Generator, _: str) -> Series:
     return replace(s, value=s.value + hit * jump)
 
 
-def _stepped(s: Series, _rng: np.random.Generator, _: str) -> Series:
-    """1 m higher from half-way through the source's span."""
+def stepped(s: Series, size_m: float = 1.0) -> Series:
+    """``size_m`` higher from half-way through the source's span."""
     half = s.t[0] + 0.5 * (s.t[-1] - s.t[0])
-    return replace(s, value=s.value + np.where(s.t >= half, 1.0, 0.0))
+    return replace(s, value=s.value + np.where(s.t >= half, size_m, 0.0))
+
+
+def _stepped(s: Series, _rng: np.random.Generator, _: str) -> Series:
+    return stepped(s)
 
 
 def _regained(s: Series, _rng: np.random.Generator, _: str) -> Series:
     """Lost for 10 s from half-way through the source's span, and 2 m higher once regained."""
     half = s.t[0] + 0.5 * (s.t[-1] - s.t[0])
-    keep = (s.t < half) | (s.t >= half + 10.0)
-    return replace(s, t=s.t[keep], value=s.value[keep] + np.where(s.t[keep] >= half, 2.0, 0.0))
+    keep = (s.t < half) | (s.t >= half + 10.0)  # its first and last samples: the same half-way
+    return stepped(replace(s, t=s.t[keep], value=s.value[keep]), 2.0)
 
 
 def _noisy(s: Series, rng: np.random.Generator, _: str) -> Series:

@@ -221,7 +221,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult
+from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult, Jump
 from altfuse.fuse.smoother.events import (
     TICK,
     VELOCITY,
@@ -392,11 +392,13 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     )  # fmt: skip
     del position, q_added  # in the noises, the layout and the events now
     r = noise.r(who)  # before EM: the local noises as they are
-    inputs, ev = _jumps(inputs, ev, r, layout, params.offset_noise_m2_s)
-    ev, stable_gain, tested = _gps_stability(inputs, ev, r, layout, params.offset_noise_m2_s)
+    steps, ev = _jumps(inputs, ev, r, layout)
+    ev, stable_gain, tested = _gps_stability(
+        inputs, (ev, steps), r, layout, params.offset_noise_m2_s
+    )
     physical = ev
     if params.offset_noise_m2_s:
-        physical = replace(ev, q_state=state_noise(inputs, times, {})[0])
+        physical = replace(ev, q_state=with_jumps(state_noise(inputs, times, {})[0], steps, times))
     plain = layout
     unknown, known = inputs.scale_unknown, inputs.scale_known
     layout, scale_gain, ev, physical = relearnt_scales(ev, physical, r, layout, unknown, known)
@@ -463,7 +465,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             # heights less the GPS's jumped x, either may have)
             "steps": "; ".join(
                 f"{time:.2f} s: {size:+.2f} m, {' or '.join(names[i] for i in sensors)}"
-                for time, sensors, size in inputs.steps
+                for time, sensors, size in steps
             ),
         },
     )
@@ -569,33 +571,37 @@ def _layout(
 
 
 def _jumps(
-    inputs: FusionInput, ev: Events, r: FloatArray, layout: Layout, given: Mapping[str, float]
-) -> tuple[FusionInput, Events]:
-    """``inputs`` and ``ev`` with each step between two sensors given to the one that jumped,
-    where the log's evidence tells (:func:`.evidence.jump_evidence`), and that sensor's samples
-    after it moved back by its jump. Its offset may still jump (the step's size is measured on
+    inputs: FusionInput, ev: Events, r: FloatArray, layout: Layout
+) -> tuple[tuple[Jump, ...], Events]:
+    """The steps between two sensors (``inputs.steps``), each given to the one that jumped
+    where the log's evidence tells (:func:`.evidence.jump_evidence`), and ``ev`` (its offsets'
+    densities without jumps) with them: that sensor's samples after it moved back by its
+    jump. Its offset may still jump (the step's size is measured on
     the clock, not on its samples), but a GPS's offset is bounded (``gps_correlation_s``) and
     returns to its mean: left to its offset, a simulator's GPS stepped 1 m drew the height 0.12
     m off both sensors over the next two minutes."""
     if not inputs.steps:
-        return inputs, ev
-    plain = state_noise(replace(inputs, steps=()), ev.t, given)[0]
-    steps = jump_evidence(replace(ev, q_state=plain), r, layout, inputs.steps)
+        return (), ev
+    steps = jump_evidence(ev, r, layout, inputs.steps)
     z = ev.z.copy()
     for time, sensors, size in steps:
         if len(sensors) == 1:
             z[(ev.who == sensors[0]) & (ev.t > time)] -= size
-    events = replace(ev, z=z, q_state=with_jumps(plain, steps, ev.t))
-    return replace(inputs, steps=steps), events
+    return steps, replace(ev, z=z, q_state=with_jumps(ev.q_state, steps, ev.t))
 
 
 def _gps_stability(
-    inputs: FusionInput, ev: Events, r: FloatArray, layout: Layout, given: Mapping[str, float]
+    inputs: FusionInput,
+    events: tuple[Events, Sequence[Jump]],
+    r: FloatArray,
+    layout: Layout,
+    given: Mapping[str, float],
 ) -> tuple[Events, float, dict[str, np.ndarray] | None]:
-    """``ev`` with the GPS offsets as stable as a barometer's where the log's evidence asks for
-    it (:func:`.evidence.gps_evidence`), that evidence and the forward pass of the events
-    chosen; no test (NaN, None) without a GPS, or where the user gave the offsets' random
-    walks."""
+    """``ev`` with the GPS offsets as stable as a barometer's (their jumps at ``steps`` kept)
+    where the log's evidence asks for it (:func:`.evidence.gps_evidence`), that evidence and
+    the forward pass of the events chosen; no test (NaN, None) without a GPS, or where the user
+    gave the offsets' random walks."""
+    ev, steps = events
     if given or "gps" not in inputs.kinds:
         return ev, math.nan, None
     # GPS and barometers take the stable densities (each bounded anew by their agreement); a
@@ -603,7 +609,7 @@ def _gps_stability(
     steady = np.array([kind != "rangefinder" for kind in inputs.kinds])
     stable = ev.q_state.copy()
     offsets = offset_noise(inputs, {}, Q_OFFSET_STABLE_GPS)[np.newaxis, :]
-    stable[:, steady] = with_jumps(offsets, inputs.steps, ev.t)[:, steady]
+    stable[:, steady] = with_jumps(offsets, steps, ev.t)[:, steady]
     return gps_evidence(ev, r, layout, stable)
 
 

@@ -305,8 +305,11 @@ def _together(steps: Sequence[Jump]) -> list[list[int]]:
             events[-1].append(k)
         else:
             events.append([k])
-    alone = [e for e in events if len(set.intersection(*(set(steps[k][1]) for k in e))) != 1]
-    return [part for e in events for part in ([[k] for k in e] if e in alone else [e])]
+    out: list[list[int]] = []
+    for e in events:
+        shared = set.intersection(*(set(steps[k][1]) for k in e))
+        out.extend([e] if len(shared) == 1 else [[k] for k in e])
+    return out
 
 
 def _own(step: Jump, sensor: int) -> Jump:

@@ -340,7 +340,7 @@ def state_noise(
     ranges = [i for i, k in enumerate(kinds) if k == "rangefinder" and names[i] not in given]
     if speed is None or speed.t.size < 2 or not ranges:
         # the same at every event: one row (an event's worth is 12 MB on a 7.4-hour log)
-        return with_jumps(q_time[np.newaxis, :], inputs.steps, times), terrain
+        return q_time[np.newaxis, :].copy(), terrain
     q_events = np.tile(q_time, (times.size, 1))
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.1
     v = Samples(speed.t, np.clip(speed.value, 0.0, MAX_SPEED_M_S))
@@ -361,7 +361,7 @@ def state_noise(
         terrain[names[i]] = q_m
         moving = q_m * speed_events + Q_GROUND_STILL
         q_events[:, i] = np.where(np.isfinite(speed_events), moving, q_time[i])
-    return with_jumps(q_events, inputs.steps, times), terrain
+    return q_events, terrain
 
 
 def with_jumps(q_state: FloatArray, steps: Sequence[Jump], times: FloatArray) -> FloatArray:
