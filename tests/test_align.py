@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from altfuse.align import (
+    Lag,
     align,
     cell_means,
     estimate_lag,
     gps_lags,
+    inertial_lag,
     merge_duplicates,
     resample,
     shift,
@@ -143,6 +145,60 @@ def test_a_gps_lag_is_found_between_sensors_logged_at_2_hz(lag_s: float) -> None
     assert lag.lag_s == pytest.approx(lag_s, abs=0.02)
     assert lag.std_s is not None
     assert abs(lag.lag_s - lag_s) < 2 * lag.std_s + 0.005
+
+
+def inertial(lag_s: float, seed: int) -> tuple[Series, Series]:
+    """A GPS's vertical velocity at 5 Hz ``lag_s`` late (0.05 m/s noisy), and the integral
+    of a 400 Hz accelerometer (0.5 m/s^2 noisy, 0.1 m/s^2 biased) on ``climb_profile``."""
+    rng = np.random.default_rng(seed)
+    ta, tg = np.arange(0.0, 120.0, 0.0025), np.arange(0.0, 120.0, 0.2) + 0.013
+    w1, w2 = 2 * np.pi / 60, 2 * np.pi / 7
+    a = 40 * w1**2 * np.cos(w1 * ta) - 2 * w2**2 * np.sin(w2 * ta)
+    a = a + 0.1 + rng.normal(0, 0.5, ta.size)
+    integral = np.concatenate(([0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) * np.diff(ta))))
+    v = 40 * w1 * np.sin(w1 * (tg - lag_s)) + 2 * w2 * np.cos(w2 * (tg - lag_s))
+    velocity = series("gps_velocity_up", tg, v + rng.normal(0, 0.05, tg.size), "velocity")
+    return velocity, series("accelerometer", ta, integral, "reference")
+
+
+@pytest.mark.parametrize("lag_s", [0.1, 0.2, 0.3])
+def test_a_gps_lag_is_found_against_the_accelerometer_where_the_barometer_cannot_tell(
+    lag_s: float,
+) -> None:
+    """A barometer that says nothing of the motion (a blocked port: its noise alone): the
+    GPS's vertical velocity against the accelerometer's integral tells its lag."""
+    rng = np.random.default_rng(4)
+    tb, tg = np.arange(0.0, 120.0, 0.1), np.arange(0.0, 120.0, 0.2) + 0.013
+    baro = series("baro", tb, rng.normal(0, 0.5, tb.size))
+    gps = series("gps", tg, climb_profile(tg - lag_s) + rng.normal(0, 0.05, tg.size), "gps")
+    against_baro = gps_lags([gps, baro])["gps"]
+    assert against_baro.std_s is None  # not estimated
+    lag = inertial_lag(against_baro, *inertial(lag_s, 5))
+    assert lag.sensor == "gps"
+    assert lag.reference == "accelerometer"
+    assert lag.lag_s == pytest.approx(lag_s, abs=0.015)
+    assert lag.std_s is not None
+    assert lag.how.startswith("its vertical velocity's changes matched to accelerometer's")
+
+
+def test_the_barometers_gps_lag_stands_unless_the_accelerometer_says_otherwise() -> None:
+    """Two estimates of one lag: the barometer's stands where they agree within
+    LAG_AGREE_SIGMAS of their errors, or where the accelerometer's is the less precise; the
+    accelerometer's where they disagree and it is the more precise."""
+    velocity, integral = inertial(0.2, 6)
+    inertial_alone = inertial_lag(
+        Lag("gps", "baro", 0.0, None, "not estimated"), velocity, integral
+    )
+    assert inertial_alone.std_s is not None
+    near = Lag("gps", "baro", 0.21, 0.99, "changes matched to baro's", 0.01)
+    assert inertial_lag(near, velocity, integral) is near
+    vague = Lag("gps", "baro", 0.05, 0.95, "changes matched to baro's", 0.2)
+    assert inertial_lag(vague, velocity, integral) is vague
+    off = Lag("gps", "baro", 0.05, 0.95, "changes matched to baro's", inertial_alone.std_s * 2)
+    taken = inertial_lag(off, velocity, integral)
+    assert taken.reference == "accelerometer"
+    assert taken.lag_s == inertial_alone.lag_s
+    assert "baro's 0.05 +- " in taken.how
 
 
 def test_no_lag_where_the_reference_explains_too_little() -> None:

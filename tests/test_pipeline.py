@@ -26,8 +26,11 @@ def test_log_0039_three_sensors_finite_over_the_flight(method: str) -> None:
     assert run.referred.names == ("gps", "baro", "rangefinder")
     assert run.provenance["sensors_dropped"] == {}
     assert np.isfinite(run.result.fused).all()
-    # 80.5 s to 175.9 s of sensor data at 10 Hz
-    assert run.referred.t.size == 955
+    # 80.5 s to 175.8 s of sensor data at 10 Hz (the GPS's last sample moved 0.11 s earlier by
+    # its lag, found against the accelerometer)
+    gps = next(s for s in run.provenance["sensors_used"] if s["name"] == "gps")
+    assert gps["lag"]["lag_s"] == pytest.approx(0.11, abs=0.01)
+    assert run.referred.t.size == 954
     assert run.referred.takeoff_s == pytest.approx(88.2, abs=0.5)
     # a low hop: baro peaks 4.0 m, GPS 2.4 m, rangefinder 2.5 m above take-off; fused 2.41/2.45 m
     assert 2.0 < np.max(run.result.fused) < 3.0

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from altfuse.align import cell_means
-from altfuse.model import Attitude, FloatArray, Imu, Samples
+from altfuse.model import Attitude, FloatArray, Imu, Samples, Series
 
 G = 9.80665  # standard gravity [m/s²]
 
@@ -74,6 +74,23 @@ def vertical_acceleration(imu: Imu, attitude: Attitude) -> tuple[FloatArray, Flo
     f = imu.acc[inside]
     f_down = np.einsum("ij,ij->i", attitude.down_at(t), f)
     return t, -f_down - G
+
+
+def velocity_integral(imu: Imu, attitude: Attitude) -> Series | None:
+    """The vertical acceleration integrated over time (trapezoids): the vertical velocity [m/s]
+    less its unknown initial value, with the accelerometer's bias as a slow ramp. Its changes
+    over a second are the velocity's (:func:`altfuse.align.inertial_lag` matches a GPS's
+    vertical velocity to them). None with fewer than two samples."""
+    t, a = vertical_acceleration(imu, attitude)
+    keep = np.isfinite(a)
+    t, a = t[keep], a[keep]
+    if t.size < 2:
+        return None
+    order = np.argsort(t, kind="stable")
+    t, a = t[order], a[order]
+    integral = np.concatenate(([0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) * np.diff(t))))
+    source = f"{imu.source} rotated by {attitude.source}, integrated"
+    return Series("accelerometer", "reference", source, "velocity up to a constant", t, integral)
 
 
 def on_clock(t: FloatArray, a: FloatArray, grid: FloatArray, rate_hz: float) -> FloatArray:

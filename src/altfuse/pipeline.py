@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from altfuse import __version__
-from altfuse.align import Aligned, Lag, Span, align, gps_lags, shift, splices
+from altfuse.align import Aligned, Lag, Span, align, gps_lags, inertial_lag, shift, splices
 from altfuse.datum import (
     Offset,
     Referral,
@@ -25,7 +25,7 @@ from altfuse.datum import (
 from altfuse.errors import NoUsableSensorsError, ParameterError, Refusal, UnsupportedLogError
 from altfuse.fuse import DEFAULT_METHOD, METHODS, FusionInput, FusionResult, Method, method
 from altfuse.guard import guard
-from altfuse.inertial import referred_vertical_acceleration
+from altfuse.inertial import referred_vertical_acceleration, velocity_integral
 from altfuse.io import read_log
 from altfuse.memory import release_free_memory
 from altfuse.model import FlightLog, Samples, Series
@@ -162,7 +162,7 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     progress.info("%s: aligning %d sources", name, len(flight.sensors))
     sensors = [tilt_correct(s, flight.attitude) for s in flight.sensors]
     sensors = [s for s in sensors if s.t.size]
-    lags = gps_lags(sensors) if options.referral == "full" else {}
+    lags = _lags(flight, sensors) if options.referral == "full" else {}
     sensors = [shift(s, lags[s.name]) if s.name in lags else s for s in sensors]
     aligned = align(sensors, options.rate_hz, options.max_gap_s, options.span)
     aligned_at = time.perf_counter()
@@ -185,6 +185,22 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     dropped.update(referred.dropped)
     _require_sensors(name, referred.names, options, dropped)
     return Prepared(flight, sensors, aligned, referred, dropped, lags)
+
+
+def _lags(flight: FlightLog, sensors: list[Series]) -> dict[str, Lag]:
+    """Each GPS's lag behind the barometer (:func:`altfuse.align.gps_lags`); the first GPS's,
+    whose vertical velocity the log has, checked against the accelerometer, or found there
+    without a barometer or rangefinder (:func:`altfuse.align.inertial_lag`)."""
+    lags = gps_lags(sensors)
+    first = next((s.name for s in sensors if s.kind == "gps"), None)
+    velocity, imu, attitude = flight.vertical_velocity, flight.imu, flight.attitude
+    if first is None or velocity is None or imu is None or attitude is None:
+        return lags
+    integral = velocity_integral(imu, attitude)
+    if integral is not None:
+        alone = Lag(first, "none", 0.0, None, "not estimated: no barometer or rangefinder")
+        lags[first] = inertial_lag(lags.get(first, alone), velocity, integral)
+    return lags
 
 
 def ground_clearances(flight: FlightLog) -> dict[str, float]:

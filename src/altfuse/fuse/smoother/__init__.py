@@ -34,7 +34,8 @@ Measurements, each fused at its own sample time (no resampling before fusion)::
 A GPS's heights' lag is not modelled here: the pipeline moves each GPS's samples (and the
 velocity with the first's) earlier by the lag it measures against the barometer
 (:func:`altfuse.align.estimate_lag`; 0.1-0.4 s on the simulators' logs, not estimated on
-altfuse's own simulated flights, whose GPS noise hides it). The velocity's lag beyond that,
+altfuse's own simulated flights, whose GPS noise hides it), or the first's, by its velocity,
+against the accelerometer (:func:`altfuse.align.inertial_lag`). The velocity's lag beyond that,
 ``tau``, is a constant state (``a`` the accelerometer's median around the sample): a steady
 climb leaves the heights' lag loose, and the velocity is precise enough for 0.3 s to matter
 (:mod:`.velocity`, which also checks it against its receiver's heights: a simulator's plane
