@@ -117,7 +117,8 @@ From the log itself:
 - whether a barometer drifts: a second forward pass with a drift rate ``r`` on each barometer's
   offset (``c += r dt``, ``r`` a random walk of density ``Q_DRIFT``), kept if it raises the
   log-likelihood of the samples both passes accept by more than ``DRIFT_GAIN`` (a likelihood-ratio
-  test at 0.1 %) and rejects no more samples (:func:`.evidence.evidence_gain`). A ramp
+  test at 0.1 %) and rejects no more samples (beyond ``EVIDENCE_SLACK``, 0.5 % of them:
+  :func:`.evidence.evidence_gain`). A ramp
   (0.05 m/s) is then told from the GPS's wander even with no third sensor (hover RMSE 2.36 m
   -> 0.23 m), and a barometer that does not drift keeps its stable offset (a drift rate it does
   not need lets the height wander where GPS and barometer are alone). A third pass gives the
