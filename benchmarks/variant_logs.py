@@ -1,9 +1,9 @@
 """The default method on the truth logs changed as other logs are: a sensor left out (a flight
 without GPS, a failed barometer), no IMU records, sensors logged at a low rate, spiked samples,
-and a GPS as noisy as a real one.
+a GPS as noisy as a real one, and barometers as noisy.
 
 Run on demand:  python benchmarks/variant_logs.py [--shared ../shared/logs] [--jobs 2]
-[--variants no-gps no-baro no-imu rate-5 spikes-baro spikes-gps noisy-gps step-gps]
+[--variants no-gps no-baro no-imu rate-5 spikes-baro spikes-gps noisy-gps noisy-baro step-gps]
 
 The variants (``tests/variants.py``, which the tests use too): ``no-<kind>``, ``no-imu``,
 ``rate-<hz>``, ``gps-<hz>``, ``spikes-<kind>``, ``noisy-<kind>``, ``step-<kind>``,
@@ -33,7 +33,9 @@ from altfuse.io import read_log  # noqa: E402
 from altfuse.pipeline import FuseOptions, prepare  # noqa: E402
 from variants import variant  # noqa: E402
 
-VARIANTS = ["no-gps", "no-baro", "no-imu", "rate-5", "spikes-baro", "spikes-gps", "noisy-gps"]
+VARIANTS = [
+    "no-gps", "no-baro", "no-imu", "rate-5", "spikes-baro", "spikes-gps", "noisy-gps", "noisy-baro",
+]  # fmt: skip
 
 
 def measure(job: tuple[Path, str]) -> tuple[str, str, bool]:
