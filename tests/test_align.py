@@ -195,6 +195,12 @@ def test_the_barometers_gps_lag_stands_unless_the_accelerometer_says_otherwise()
     vague = Lag("gps", "baro", 0.05, 0.95, "changes matched to baro's", 0.2)
     assert inertial_lag(vague, velocity, integral) is vague
     off = Lag("gps", "baro", 0.05, 0.95, "changes matched to baro's", inertial_alone.std_s * 2)
+    rng = np.random.default_rng(7)
+    still = series("gps_velocity_up", velocity.t, rng.normal(0, 0.05, velocity.t.size), "velocity")
+    neither = Lag("gps", "baro", 0.0, 0.4, "not estimated: baro explains 40% of its changes")
+    unknown = inertial_lag(neither, still, integral)
+    assert (unknown.lag_s, unknown.std_s, unknown.reference) == (0.0, None, "baro")
+    assert unknown.how.startswith(f"{neither.how}; its vertical velocity: "), unknown.how
     taken = inertial_lag(off, velocity, integral)
     assert taken.reference == "accelerometer"
     assert taken.lag_s == inertial_alone.lag_s

@@ -376,9 +376,7 @@ def inertial_lag(lag: Lag, velocity: Series, integral: Series) -> Lag:
         if lag.std_s is not None:
             return lag
         why = found.how.removeprefix("not estimated: ")
-        return replace(
-            lag, how=f"{lag.how}; nor against the accelerometer, by its vertical velocity ({why})"
-        )
+        return replace(lag, how=f"{lag.how}; its vertical velocity: {why}")
     how = f"its vertical velocity's {found.how}"
     if lag.std_s is not None:
         error = math.hypot(lag.std_s, found.std_s)
