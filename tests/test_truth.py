@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -112,6 +113,20 @@ def test_a_gps_alone_has_its_lag_from_the_accelerometer() -> None:
     lag = prepare(flight, FuseOptions(min_sensors=1)).lags["gps"]
     assert lag.reference == "accelerometer"
     assert lag.lag_s == pytest.approx(0.2, abs=0.02)
+
+
+def test_a_second_gps_is_not_given_the_first_one_s_velocity_lag() -> None:
+    """The GPS velocity is the first receiver's: with that receiver gone, the one left (here
+    the 9 m sonar flight's, renamed ``gps2``, its barometer noisy) keeps its own lag's verdict
+    against the barometer, not the first receiver's velocity's against the accelerometer."""
+    flight = variant(
+        read_log(shared_log("truth/copter_4.0.7_eduardoavila_sonar_9m.BIN")), "noisy-baro"
+    )
+    renamed = tuple(replace(s, name="gps2") if s.name == "gps" else s for s in flight.sensors)
+    lags = prepare(replace(flight, sensors=renamed), FuseOptions()).lags
+    assert set(lags) == {"gps2"}
+    assert (lags["gps2"].reference, lags["gps2"].lag_s) == ("baro", 0.0)
+    assert prepare(flight, FuseOptions()).lags["gps"].reference == "accelerometer"
 
 
 def test_the_305_m_climb_barometer_scale_is_found_and_fused_right() -> None:

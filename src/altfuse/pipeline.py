@@ -188,18 +188,21 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
 
 
 def _lags(flight: FlightLog, sensors: list[Series]) -> dict[str, Lag]:
-    """Each GPS's lag behind the barometer (:func:`altfuse.align.gps_lags`); the first GPS's,
-    whose vertical velocity the log has, checked against the accelerometer, or found there
-    without a barometer or rangefinder (:func:`altfuse.align.inertial_lag`)."""
+    """Each GPS's lag behind the barometer (:func:`altfuse.align.gps_lags`); the first GPS's
+    (``gps``, whose vertical velocity the log has: :func:`fusion_input` moves it by that lag),
+    checked against the accelerometer, or found there without a barometer or rangefinder
+    (:func:`altfuse.align.inertial_lag`). Not where that GPS is gone (its velocity is no
+    other's)."""
     lags = gps_lags(sensors)
-    first = next((s.name for s in sensors if s.kind == "gps"), None)
     velocity, imu, attitude = flight.vertical_velocity, flight.imu, flight.attitude
-    if first is None or velocity is None or imu is None or attitude is None:
+    if velocity is None or imu is None or attitude is None:
+        return lags
+    if not any(s.name == "gps" for s in sensors):
         return lags
     integral = velocity_integral(imu, attitude)
     if integral is not None:
-        alone = Lag(first, "none", 0.0, None, "not estimated: no barometer or rangefinder")
-        lags[first] = inertial_lag(lags.get(first, alone), velocity, integral)
+        alone = Lag("gps", "none", 0.0, None, "not estimated: no barometer or rangefinder")
+        lags["gps"] = inertial_lag(lags.get("gps", alone), velocity, integral)
     return lags
 
 
