@@ -226,8 +226,9 @@ LAG_BOX_S = 0.3
 LAG_BOX_STEPS = 2
 #: Two estimates of a GPS's lag (against a barometer, and its vertical velocity against the
 #: accelerometer) disagree beyond this many of their combined standard errors: the simulators'
-#: 13 logs 0.0-2.6 (their barometers within 0.03 s of the truth); with the barometer as noisy
-#: as a GPS 3.3-3.7 on three, whose barometers' lags were 0.04-0.09 s off.
+#: 13 logs 0.0-2.7 (their barometers within 0.03 s of the truth); with the barometer as noisy
+#: as a GPS 3.3-3.6 on three, whose barometers' lags were 0.04-0.09 s off
+#: (``benchmarks/gps_lags.py``).
 LAG_AGREE_SIGMAS = 3.0
 
 
@@ -369,7 +370,7 @@ def inertial_lag(lag: Lag, velocity: Series, integral: Series) -> Lag:
     13 logs, and 0.04-0.09 s off on three more (0.1-0.2 s: 0.2-0.5 m in their climbs). Against
     the accelerometer the simulators' GPS lags come out within 0.04 s of their lags behind
     ``SIM`` on 12 of 13 (the 3.3 plane's noisy IMU explains 1 %; the barometer's, within 0.03
-    s, disagree with them by 0.0-2.6 standard errors); on the real logs, 0.11 and 0.16 s on
+    s, disagree with them by 0.0-2.7 standard errors); on the real logs, 0.11 and 0.16 s on
     two (95 % explained)."""
     found = estimate_lag(velocity, integral)
     if found.std_s is None:
