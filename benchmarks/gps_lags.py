@@ -29,7 +29,6 @@ from altfuse.errors import AltfuseError  # noqa: E402
 from altfuse.inertial import velocity_integral  # noqa: E402
 from altfuse.io import read_log  # noqa: E402
 from altfuse.pipeline import FuseOptions, prepare  # noqa: E402
-from altfuse.screen import screen  # noqa: E402
 from variants import variant  # noqa: E402
 
 
@@ -48,10 +47,10 @@ def measure(job: tuple[Path, str]) -> str:
     try:
         flight = read_log(path)
         flight = variant(flight, how) if how else flight
-        taken = prepare(flight, FuseOptions()).lags.get("gps")
+        prepared = prepare(flight, FuseOptions())
     except AltfuseError as exc:
         return f"{label} refused: {str(exc)[:60]}"
-    screened = screen(flight)
+    taken, screened = prepared.lags.get("gps"), prepared.log  # the log as screened
     baro = gps_lags(list(screened.sensors)).get("gps")
     inertial = None
     imu, attitude = screened.imu, screened.attitude

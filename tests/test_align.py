@@ -18,6 +18,7 @@ from altfuse.align import (
     splices,
 )
 from altfuse.errors import NoUsableSensorsError
+from altfuse.metrics import cumulative_integral
 from altfuse.model import Series
 
 
@@ -155,7 +156,7 @@ def inertial(lag_s: float, seed: int) -> tuple[Series, Series]:
     w1, w2 = 2 * np.pi / 60, 2 * np.pi / 7
     a = 40 * w1**2 * np.cos(w1 * ta) - 2 * w2**2 * np.sin(w2 * ta)
     a = a + 0.1 + rng.normal(0, 0.5, ta.size)
-    integral = np.concatenate(([0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) * np.diff(ta))))
+    integral = cumulative_integral(ta, a)
     v = 40 * w1 * np.sin(w1 * (tg - lag_s)) + 2 * w2 * np.cos(w2 * (tg - lag_s))
     velocity = series("gps_velocity_up", tg, v + rng.normal(0, 0.05, tg.size), "velocity")
     return velocity, series("accelerometer", ta, integral, "reference")

@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from altfuse.errors import NoUsableSensorsError
+from altfuse.metrics import cumulative_integral
 from altfuse.model import FloatArray, SensorKind, Series, sensor_kind
 from altfuse.spline import cubic_spline
 
@@ -285,7 +286,7 @@ def estimate_lag(series: Series, reference: Series) -> Lag:
     # the reference's mean over the box around each time, from its running integral: a point
     # interpolated between two samples averages their noise, one on a sample does not, and the
     # fit would favour the lags that fall between samples
-    integral = np.concatenate(([0.0], np.cumsum(0.5 * (rv[1:] + rv[:-1]) * np.diff(rt))))
+    integral = cumulative_integral(rt, rv)
     half = box / 2
     explained_at = np.empty(taus.size)
     for j, tau in enumerate(taus):

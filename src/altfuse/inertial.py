@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from altfuse.align import cell_means
+from altfuse.metrics import cumulative_integral
 from altfuse.model import Attitude, FloatArray, Imu, Samples, Series
 
 G = 9.80665  # standard gravity [m/s²]
@@ -88,7 +89,7 @@ def velocity_integral(imu: Imu, attitude: Attitude) -> Series | None:
         return None
     order = np.argsort(t, kind="stable")
     t, a = t[order], a[order]
-    integral = np.concatenate(([0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) * np.diff(t))))
+    integral = cumulative_integral(t, a)
     source = f"{imu.source} rotated by {attitude.source}, integrated"
     return Series("accelerometer", "reference", source, "velocity up to a constant", t, integral)
 

@@ -34,6 +34,13 @@ def samples_in(span_s: float, step: float, most: int) -> int:
     return round(ratio) if ratio < most else most
 
 
+def cumulative_integral(t: FloatArray, v: FloatArray) -> FloatArray:
+    """The integral of the samples ``v`` at the sorted times ``t`` from the first to each,
+    by trapezoids (scipy's ``cumulative_trapezoid(v, t, initial=0)``)."""
+    steps = 0.5 * (v[1:] + v[:-1]) * np.diff(t)
+    return np.asarray(np.concatenate(([0.0], np.cumsum(steps))))
+
+
 def running_median(x: FloatArray, window: int, min_periods: int = 1) -> FloatArray:
     """The median over a centred window of ``window`` samples at each sample, NaN skipped, NaN
     where fewer than ``min_periods`` are valid: pandas' ``rolling(window, center=True,

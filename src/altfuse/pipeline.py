@@ -195,9 +195,12 @@ def _lags(flight: FlightLog, sensors: list[Series]) -> dict[str, Lag]:
     other's)."""
     lags = gps_lags(sensors)
     velocity, imu, attitude = flight.vertical_velocity, flight.imu, flight.attitude
-    if velocity is None or imu is None or attitude is None:
-        return lags
-    if not any(s.name == "gps" for s in sensors):
+    if (
+        velocity is None
+        or imu is None
+        or attitude is None
+        or "gps" not in {s.name for s in sensors}
+    ):
         return lags
     integral = velocity_integral(imu, attitude)
     if integral is not None:

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from altfuse.metrics import cumulative_integral
 from altfuse.model import FloatArray, Samples
 
 #: The series of an event that is no height sample: a clock tick, a GPS's vertical velocity.
@@ -40,7 +41,7 @@ def interval_mean(series: Samples, t: FloatArray) -> FloatArray:
     ts, v = series
     order = np.argsort(ts, kind="stable")
     ts, v = ts[order], v[order]
-    integral = np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))))
+    integral = cumulative_integral(ts, v)
     at_events = np.interp(t, ts, integral)
     dt = np.diff(t, prepend=t[0])
     with np.errstate(invalid="ignore", divide="ignore"):
