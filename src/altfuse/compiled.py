@@ -49,7 +49,7 @@ class _Compiling(event.Listener):
         if self.depth == 1 and module.startswith("altfuse") and module not in self.said:
             self.said.add(module)
             logging.getLogger("altfuse.progress").info(
-                "compiling the loops of %s for this machine (once: later runs load them)", module
+                "compiling %s (numba, once per machine)", module
             )
 
     def on_end(self, _ev: event.Event) -> None:
