@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from altfuse.align import Aligned
-from altfuse.datum import refer_to_takeoff, referred_samples
+from altfuse.datum import dynamic_head, refer_to_takeoff, referred_samples
 from altfuse.fuse import FusionInput
 from altfuse.fuse.support import SupportParams, fuse_support
 from altfuse.model import Samples, Series
@@ -200,6 +200,31 @@ def test_a_barometer_s_scale_is_found_beside_a_step_in_it() -> None:
     baro = {o.name: o for o in ref.offsets}["baro"]
     assert baro.scale_applied
     assert baro.scale == pytest.approx(1.05, abs=0.006)
+
+
+def test_a_barometer_s_scale_is_found_beside_its_dynamic_pressure() -> None:
+    """A climb to 50 m, a cruise there at 8 m/s and back, the barometer 5 % high and reading
+    0.8 V^2 / 2g higher (2.6 m at 8 m/s: its static pressure lowered by the air flowing past):
+    a fit of the heights alone takes the cruise's rise for a scale (1.078); with the ground speed
+    the head is fitted beside it (:func:`altfuse.datum.dynamic_head`) and the scale is 1.05."""
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 200.0, 0.1)
+    h = np.interp(t, [0, 20, 60, 140, 180, 200], [0, 0, 50, 50, 0, 0])
+    v = np.interp(t, [0, 70, 80, 120, 130, 200], [0, 0, 8, 8, 0, 0])
+    head = v**2 / (2 * 9.80665)
+    gps = 500 + h + rng.normal(0, 0.02, t.size)
+    baro = 2.0 + 1.05 * h + 0.8 * head + rng.normal(0, 0.1, t.size)
+    names = ("gps", "baro")
+    aligned = Aligned(t, names, names, np.column_stack([gps, baro]), 10.0, 1.0, "union", {})
+    alone = {o.name: o for o in refer_to_takeoff(aligned).offsets}["baro"]
+    assert alone.scale_estimate == pytest.approx(1.078, abs=0.01)
+    speed = Samples(t, v)
+    baro_scale = {o.name: o for o in refer_to_takeoff(aligned, speed=speed).offsets}["baro"]
+    assert baro_scale.scale_applied
+    assert baro_scale.scale == pytest.approx(1.05, abs=0.003)
+    assert "against gps beside its dynamic pressure over the flight" in str(baro_scale.scale_method)
+    assert dynamic_head(speed, t) == pytest.approx(head)
+    assert dynamic_head(Samples(t, v / 3), t) is None  # 2.7 m/s at most: 0.36 m, too little
 
 
 @pytest.mark.parametrize("gps", [False, True])

@@ -810,12 +810,16 @@ def test_a_splice_starts_the_motion_and_the_offsets_afresh() -> None:
     assert np.isnan(run.result.traces["offset"][pause]).all()
 
 
-def test_a_long_flight_keeps_its_height_with_its_agreeing_sensors(tmp_path: Path) -> None:
+def test_a_long_flight_keeps_its_height_with_its_agreeing_sensors(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """45 minutes of flight: a real 150 s flight (a crash at its end) repeated 18 times. GPS
     and barometer agree within a metre throughout, but for the crashes. With both offsets
     random walks nothing held the height's common mode: the fused height wandered 4.2 m from
     both sensors, its fused_std growing to 2.6 m. A GPS's error is bounded
-    (GPS_CORRELATION_S): 0.85 m at most, fused_std below 0.6 m."""
+    (GPS_CORRELATION_S): 0.85 m at most, fused_std below 0.6 m. (The barometer's dynamic
+    pressure, which explains much of what the two part by, is left out of the random walk's
+    run: with it that run too stays within 0.63 m.)"""
     log = tmp_path / "long.bin"
     repeated_log(shared_log("ardupilot/beastayyg_log_0036_mechanical_failure.bin"), log, 30)
     prepared = prepare_log(log, FuseOptions())
@@ -827,6 +831,7 @@ def test_a_long_flight_keeps_its_height_with_its_agreeing_sensors(tmp_path: Path
     assert guard["max_excursion_m"] < 1.5
     assert np.nanmax(run.result.tick_traces["fused_std"]) < 1.0
     # a bound of 10^6 s is a random walk over any flight: as before
+    monkeypatch.setattr("altfuse.fuse.smoother.evidence.DYNAMIC_GAIN", math.inf)
     walk = {"smoother": SmootherParams(gps_correlation_s=1e6)}
     run = run_method(prepared, FuseOptions(params=walk))
     assert run.provenance["guard"]["max_excursion_m"] > 3.0

@@ -15,7 +15,10 @@ and alignment:
 - ``step-<kind>``: that kind's heights 1 m higher from half-way through each source's span
   (a GPS's jump when its fix changes, a barometer's step);
 - ``regain-<kind>``: that kind lost for 10 s from half-way, and 2 m higher once regained (a
-  GPS's fix back elsewhere).
+  GPS's fix back elsewhere);
+- ``airflow-<k>``: each barometer ``k V^2 / 2g`` higher at the GPS's ground speed ``V`` (the
+  static pressure lowered by ``k`` times the dynamic pressure, as on real copters in forward
+  flight: :data:`altfuse.datum.DYNAMIC_PRIOR`).
 """
 
 from __future__ import annotations
@@ -66,6 +69,12 @@ def _regained(s: Series, _rng: np.random.Generator, _: str) -> Series:
     return stepped(replace(s, t=s.t[keep], value=s.value[keep]), 2.0)
 
 
+def _airflow(s: Series, speed: Series, k: float) -> Series:
+    """``k V^2 / 2g`` higher, ``V`` the ground ``speed`` at its samples."""
+    v = np.interp(s.t, speed.t, speed.value)
+    return replace(s, value=s.value + k * v**2 / (2.0 * 9.80665))
+
+
 def _noisy(s: Series, rng: np.random.Generator, _: str) -> Series:
     """0.3 m of white noise and a random walk of 0.01 m^2/s (a real receiver's)."""
     dt = np.maximum(np.diff(s.t, prepend=s.t[0]), 0.0)
@@ -99,6 +108,9 @@ def variant(flight: FlightLog, how: str, seed: int = 1) -> FlightLog:
             if (series := getattr(flight, field)) is not None
         }
         return replace(_each(flight, "gps", lambda s: _thinned(s, rng, arg)), **speeds)
+    if what == "airflow" and flight.ground_speed is not None:
+        speed = flight.ground_speed
+        return _each(flight, "baro", lambda s: _airflow(s, speed, float(arg)))
     if what not in CHANGES or not arg:
         raise ValueError(f"unknown variant {how!r}")
     kinds, change = CHANGES[what]

@@ -14,6 +14,7 @@ from altfuse.fuse.base import Jump
 from altfuse.fuse.smoother.model import (
     Events,
     Layout,
+    Regressor,
     scale_regressors,
     scales_agree,
     scales_to_learn,
@@ -37,6 +38,9 @@ HEIGHTS = Keep(states=(0,), var_h=False, rows=False, verdicts=frozenset(("loglik
 #: its minimum on the ground: 0.661 m, coverage 0.05). The simulators' logs, whose temperature
 #: follows the height and must not be fitted, gain at most 1.3.
 THERMAL_GAIN = 3.0
+#: Log-likelihood gain that adds the barometers' dynamic-pressure coefficients: a Bayes factor of
+#: 20, as THERMAL_GAIN.
+DYNAMIC_GAIN = 3.0
 #: Log-likelihood gain that adds the scale errors: a Bayes factor of 20, as THERMAL_GAIN (the
 #: filter's likelihood integrates the scale over its prior). Measured: a simulated mission whose
 #: barometer reads 7 % high over 15 m, which the datum cannot tell, gains 40-300; the
@@ -129,6 +133,22 @@ def scale_evidence(
     if not scales_agree(richer, verdict["last"], unknown):
         gain = -math.inf
     return (richer if gain > SCALE_GAIN else layout), gain
+
+
+def dynamic_evidence(
+    physical: Events, r: FloatArray, layout: Layout, regressors: Sequence[Regressor]
+) -> tuple[Layout, float]:
+    """``layout`` with the barometers' dynamic-pressure coefficients (``regressors``:
+    :func:`.model.dynamic_regressors`) where the log's evidence asks for them, and that
+    evidence (NaN without them). Made with the offsets' physical random walks (``physical``),
+    as :func:`thermal_evidence`, and before it and the drift, which would otherwise take the
+    barometer's rise in each fast stretch for a warming or a drift."""
+    if not regressors:
+        return layout, math.nan
+    richer = layout.adding(regressors)
+    without, verdict = likelihoods((physical, r, layout), (physical, r, richer))
+    gain = evidence_gain(without, verdict)
+    return (richer if gain > DYNAMIC_GAIN else layout), gain
 
 
 def thermal_evidence(

@@ -11,7 +11,7 @@ from typing import Literal
 
 import numpy as np
 
-from altfuse.datum import GROUND_MAX_SPEED_M_S
+from altfuse.datum import DYNAMIC_PRIOR, GROUND_MAX_SPEED_M_S, dynamic_head
 from altfuse.fuse.smoother.compiled import compiled
 from altfuse.fuse.smoother.events import TICK, VELOCITY
 from altfuse.fuse.smoother.kalman import innovation, update
@@ -98,7 +98,7 @@ class Regressor:
     scale error of 1, a PX4 log 0.006 -> 1.03 m; a sensor's lag, ``coef`` minus the velocity,
     quadplane 0.026 -> 0.195 m.)"""
 
-    name: Literal["thermal", "scale", "lag"]
+    name: Literal["thermal", "scale", "lag", "dynamic"]
     sensor: int
     coef: FloatArray  # per event; read at the sensor's own samples only
     prior: float
@@ -205,6 +205,31 @@ def thermal_regressors(
         mine = who == i
         dtemp[mine] = (at_samples - at_samples[0])[position[mine]]
         out.append(Regressor("thermal", i, dtemp, THERMAL_PRIOR))
+    return out
+
+
+def dynamic_regressors(
+    speed: Samples | None,
+    samples: Sequence[Samples],
+    kinds: Sequence[str],
+    events: tuple[np.ndarray, np.ndarray],
+) -> list[Regressor]:
+    """A dynamic-pressure coefficient for each barometer (prior DYNAMIC_PRIOR): ``coef`` its
+    dynamic head ``V^2 / 2g`` [m] at its samples (:func:`altfuse.datum.dynamic_head`, from the
+    ground ``speed``); none with no sensor but barometers (nothing tells the head from the
+    height). ``events``: their series and positions."""
+    if set(kinds) <= {"baro"}:
+        return []
+    who, position = events
+    out = []
+    for i, kind in enumerate(kinds):
+        head = dynamic_head(speed, samples[i].t) if kind == "baro" else None
+        if head is None:
+            continue
+        coef = np.zeros(who.size)
+        mine = who == i
+        coef[mine] = head[position[mine]]
+        out.append(Regressor("dynamic", i, coef, DYNAMIC_PRIOR))
     return out
 
 
