@@ -32,8 +32,11 @@ into the vertical, 1.3 m/s^2 of false acceleration, as a plane's attitude error 
 angles), ``imu-clip`` (a shock: five consecutive IMU samples pinned at the 16 g range, 15 m/s of
 false velocity, too long for a median of its neighbours to call a spike), ``imu-25hz`` (the IMU
 logged at 25 Hz, as older and busier logs do); and two of the other sensors:
-``baro-scale`` (the barometer 7 % high over the flight: a warm sensor) and ``rangefinder-low``
-(mounted 0.1 m up, below its 0.2 m minimum: OutOfRangeLow on the ground). And three of the
+``baro-scale`` (the barometer 7 % high over the flight: a warm sensor), ``baro-airflow`` (the
+barometer 1 m higher at the flight's top ground speed, as the square of the speed: the air
+flowing past lowers the pressure it reads, as on real copters; not on the hover and Paper A's
+flight, which do not cruise) and ``rangefinder-low`` (mounted 0.1 m up, below its 0.2 m
+minimum: OutOfRangeLow on the ground). And three of the
 flight and its log: ``roll-flip`` (a full turn about the roll axis in 1 s, as aerobatic and
 tumbling logs show: the logged roll, in [-180, 180) degrees as ArduPilot logs it, wraps through
 +-180, and the rangefinder, pointing at the sky, reads out of range), ``splice`` (nothing
@@ -291,13 +294,14 @@ class Scenario:
     default_duration_s: float
     min_duration_s: float
     lands: bool = True  # its last descent reaches the ground
+    cruises: bool = True  # it flies horizontally (a ground speed)
 
 
 SCENARIOS: dict[str, Scenario] = {
     s.name: s
     for s in (
-        Scenario("paper-a", paper_a, 75.0, 75.0),
-        Scenario("hover", hover, 180.0, 120.0, lands=False),
+        Scenario("paper-a", paper_a, 75.0, 75.0, cruises=False),
+        Scenario("hover", hover, 180.0, 120.0, lands=False, cruises=False),
         Scenario("mission", mission, 120.0, 60.0),
         Scenario("climb", climb, 150.0, 120.0),
     )
@@ -314,17 +318,24 @@ FAULTS = (
     "imu-clip",
     "imu-25hz",
     "baro-scale",
+    "baro-airflow",
     "rangefinder-low",
     "roll-flip",
     "splice",
     "hard-landing",
 )
-#: The faults that need a scenario that lands.
+#: The faults that need a scenario that lands, and one that cruises.
 LANDING_FAULTS = ("hard-landing",)
+CRUISING_FAULTS = ("baro-airflow",)
 #: The accelerometer's range [m/s^2]: ArduPilot's IMUs clip at 16 g.
 IMU_CLIP_M_S2 = 16.0 * G
 #: A barometer's scale error with ``baro-scale``: 7 % high, as the simulators' climbs show.
 BARO_SCALE = 1.07
+#: How much higher the barometer reads at the flight's top ground speed with ``baro-airflow``
+#: [m]: ``k V^2 / 2g`` (the static pressure lowered by ``k`` times the dynamic pressure), ``k``
+#: 0.78 at a copter's 5 m/s as two real copters' barometers read (0.8 and 1.2), 0.05 at a
+#: plane's 20 m/s.
+BARO_AIRFLOW_M = 1.0
 #: The rangefinder's mount height with ``rangefinder-low``: below its minimum range, so that
 #: on the ground it reads OutOfRangeLow.
 RANGEFINDER_LOW_MOUNT_M = 0.1
@@ -356,9 +367,14 @@ class SimulatedFlight:
 
 
 def applicable_faults(scenario: str) -> tuple[str, ...]:
-    """The faults ``scenario`` can take: all but LANDING_FAULTS where it does not land."""
-    lands = SCENARIOS[scenario].lands
-    return tuple(f for f in FAULTS if lands or f not in LANDING_FAULTS)
+    """The faults ``scenario`` can take: all but LANDING_FAULTS where it does not land, and
+    CRUISING_FAULTS where it does not cruise."""
+    spec = SCENARIOS[scenario]
+    return tuple(
+        f
+        for f in FAULTS
+        if (spec.lands or f not in LANDING_FAULTS) and (spec.cruises or f not in CRUISING_FAULTS)
+    )
 
 
 def _fault_window(duration_s: float, start: float, length_s: float) -> tuple[float, float]:
@@ -384,9 +400,10 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     unknown = [f for f in faults if f not in FAULTS]
     if unknown:
         raise ParameterError(f"unknown fault {unknown[0]!r}; choose from {', '.join(FAULTS)}")
-    if landing := [f for f in faults if f not in applicable_faults(scenario)]:
-        landers = ", ".join(n for n, s in SCENARIOS.items() if s.lands)
-        raise ParameterError(f"{scenario} does not land: {landing[0]} needs one of {landers}")
+    if refused := [f for f in faults if f not in applicable_faults(scenario)]:
+        able = ", ".join(n for n in SCENARIOS if refused[0] in applicable_faults(n))
+        need = "land" if refused[0] in LANDING_FAULTS else "cruise"
+        raise ParameterError(f"{scenario} does not {need}: {refused[0]} needs one of {able}")
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration, DT_S)
     p = spec.make(t, duration)
@@ -472,6 +489,9 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     alt = alt + truth(ts, p.baro_sigma_m) * rng.normal(0.0, 1.0, ts.size)
     if "baro-drift" in faults:
         alt = alt + 0.05 * np.clip(ts - 0.4 * duration, 0.0, None)
+    if "baro-airflow" in faults:
+        speed = np.abs(np.gradient(p.distance_m, DT_S))
+        alt = alt + BARO_AIRFLOW_M * (sensed(ts, speed) / speed.max()) ** 2
     log("BARO", ts, 0, alt, temp, 1)
 
     # rangefinder: 20 Hz along the body axis, out-of-range codes as drivers log them
