@@ -309,11 +309,12 @@ def test_a_climbs_band_counts_the_sensors_unknown_latency() -> None:
 )
 def test_a_barometer_that_reads_high_in_forward_flight_is_corrected(name: str) -> None:
     """The four copters that fly at 5 m/s, each barometer V^2 / 2g higher at the ground speed
-    V (``airflow-1``: 1.3 m at 5 m/s, as a real copter's can; the 92 m climb's noisy barometer
-    too): 0.23-0.65 m RMSE before, the datum's scale taking the cruise at altitude for 0.6 %
-    more and the smoother the rest for the GPS's wander. With the dynamic head in the scale's
-    fit and the smoother's coefficient (:func:`altfuse.datum.dynamic_head`), 0.013-0.019 m:
-    each within the bar on RMSE and maximum, the coefficient within 0.06 of the truth."""
+    V (``airflow-1``: 1.3 m at 5 m/s, as real copters' barometers read; the 92 m climb's noisy
+    barometer too): 0.23-0.65 m RMSE before, the datum's scale taking the cruise at altitude
+    for 0.6 % more and the smoother the rest for the GPS's wander. With the dynamic head in the
+    scale's fit and the smoother's coefficient (:func:`altfuse.datum.dynamic_head`),
+    0.013-0.019 m: each within the bar on RMSE and maximum, the coefficient within 0.06 of the
+    truth."""
     evaluation = evaluate_prepared(changed(name, "airflow-1"), ["smoother"], truth="sim")
     params = evaluation.runs["smoother"].result.params
     assert params["baro_dynamic"] == "modelled"

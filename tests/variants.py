@@ -16,9 +16,10 @@ and alignment:
   (a GPS's jump when its fix changes, a barometer's step);
 - ``regain-<kind>``: that kind lost for 10 s from half-way, and 2 m higher once regained (a
   GPS's fix back elsewhere);
-- ``airflow-<k>``: each barometer ``k V^2 / 2g`` higher at the GPS's ground speed ``V`` (the
-  static pressure lowered by ``k`` times the dynamic pressure, as on real copters in forward
-  flight: :data:`altfuse.datum.DYNAMIC_PRIOR`).
+- ``airflow-<k>``: a copter's barometers ``k V^2 / 2g`` higher at its ground speed ``V`` (the
+  static pressure lowered by ``k`` times the dynamic pressure, as real copters' barometers
+  read in forward flight: :data:`altfuse.datum.DYNAMIC_PRIOR`; 1.3 m at 5 m/s where ``k`` is
+  1); a plane's as logged (its static port: ``k`` 1 would be 108 m at the 3.3 plane's 46 m/s).
 """
 
 from __future__ import annotations
@@ -108,8 +109,10 @@ def variant(flight: FlightLog, how: str, seed: int = 1) -> FlightLog:
             if (series := getattr(flight, field)) is not None
         }
         return replace(_each(flight, "gps", lambda s: _thinned(s, rng, arg)), **speeds)
-    if what == "airflow" and flight.ground_speed is not None:
+    if what == "airflow":
         speed = flight.ground_speed
+        if flight.vehicle != "copter" or speed is None:
+            return flight
         return _each(flight, "baro", lambda s: _airflow(s, speed, float(arg)))
     if what not in CHANGES or not arg:
         raise ValueError(f"unknown variant {how!r}")
