@@ -118,7 +118,12 @@ From the log itself:
   had given to a temperature coefficient), a PX4 log's with 11 % of its GPS left -0.5 (gain
   14), the other two none; the simulators' fast copters with ``V^2 / 2g`` added to their
   barometers, 0.23-0.65 -> 0.013-0.019 m RMSE (with :func:`altfuse.datum.dynamic_head` in the
-  datum's scale fit too);
+  datum's scale fit too). The ground speed stands in for the airspeed: in a wind the two legs
+  of a flight out and back feel different airspeeds at one ground speed. Altfuse's mission
+  (k 0.8) with a steady wind along its track, 3 seeds: at 2 m/s taken on one (0.581 -> 0.232
+  m), at 3 m/s on two (0.493 -> 0.459, and 0.164 -> 0.438 m, k 0.13 for 0.8), at 4 m/s on
+  none; without wind 0.72-0.77 -> 0.07-0.10 m. The airspeed from the GPS's velocity less a
+  fitted wind (the head's cross term with each velocity component) is the next step;
 - the terrain's roughness under a rangefinder, per metre flown (:func:`terrain_noise`, with the
   horizontal speed from ``GPS.Spd``): over flat ground, or hovering, the rangefinder is an
   absolute reference; over hills it tells only short-term changes. Where the speed ends (a GPS
