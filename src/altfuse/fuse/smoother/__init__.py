@@ -431,7 +431,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         chosen = tested  # the GPS test's pass of this very model, where it ran
     # the forward pass of the layout chosen, where one was made with these noises
     layout, drifts = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
-    del tested, chosen, r
+    del tested, chosen, r, dynamic
     release_free_memory()  # the tests' passes, before the smoothing ones
     floor = ev.q_accel
     ev, out = _smoothed(ev, layout, noise, floor if params.accel_noise_m2_s3 is None else None)

@@ -453,12 +453,13 @@ def process_noise(
 Rows = tuple[FloatArray, np.ndarray, FloatArray]
 
 
-def measurement_rows(layout: Layout, who: np.ndarray) -> Rows:
+def measurement_rows(layout: Layout, who: np.ndarray, coef: FloatArray | None = None) -> Rows:
     """H of every event (:data:`Rows`; :func:`measurement_row` makes an event's row): for a
     sample of sensor ``i``, h plus the sensor's offset (GPS, baro) or minus its ground height
     (rangefinder), plus its regressors' terms; v for a vertical-velocity sample; 0 for a tick.
-    Kept as the rows of each series and the regressors' coefficients: the rows of every event
-    cost 44 MB on a 7.4-hour log (seven states)."""
+    Kept as the rows of each series and the regressors' coefficients (``coef``, where
+    :func:`regressor_coefficients` made them already): the rows of every event cost 44 MB on
+    a 7.4-hour log (seven states)."""
     m = layout.sign.size
     base = np.zeros((m + 2, layout.n))  # by series: VELOCITY (-2), TICK (-1), then the sensors
     base[VELOCITY + 2, 1] = 1.0
@@ -467,10 +468,17 @@ def measurement_rows(layout: Layout, who: np.ndarray) -> Rows:
     regs = np.array(
         [(layout.index(j), r.sensor) for j, r in enumerate(layout.regressors)], dtype=np.int64
     ).reshape(-1, 2)
-    coef = np.zeros((len(layout.regressors), who.size))
-    for j, r in enumerate(layout.regressors):
-        coef[j] = r.coef
+    if coef is None:
+        coef = regressor_coefficients(layout.regressors, who.size)
     return base, regs, coef
+
+
+def regressor_coefficients(regressors: Sequence[Regressor], events: int) -> FloatArray:
+    """The regressors' coefficients at every event, one row each (:func:`measurement_rows`)."""
+    coef = np.zeros((len(regressors), events))
+    for j, r in enumerate(regressors):
+        coef[j] = r.coef
+    return coef
 
 
 @compiled
