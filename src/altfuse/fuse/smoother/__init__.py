@@ -122,8 +122,13 @@ From the log itself:
   of a flight out and back feel different airspeeds at one ground speed. Altfuse's mission
   (k 0.8) with a steady wind along its track, 3 seeds: at 2 m/s taken on one (0.581 -> 0.232
   m), at 3 m/s on two (0.493 -> 0.459, and 0.164 -> 0.438 m, k 0.13 for 0.8), at 4 m/s on
-  none; without wind 0.72-0.77 -> 0.07-0.10 m. The airspeed from the GPS's velocity less a
-  fitted wind (the head's cross term with each velocity component) is the next step;
+  none; without wind 0.72-0.77 -> 0.07-0.10 m. (Tried: the airspeed as the GPS's ground
+  velocity, from ``GPS.GCrs``, less a steady wind ``W``, ``k |V - W|^2 / 2g`` being
+  ``k V^2 / 2g - V . kW / g`` and a constant, with two more states per barometer offered
+  beside the head alone: that mission in a 2-5 m/s wind 0.06-0.32 m, and the truth logs'
+  copters in a 3 m/s wind 0.005-0.028 m against 0.012-0.662, kW within 0.3 m/s; not kept,
+  as the extra per-event coefficients put the 300 MB log's peak at 1.59x the file, and the
+  45-minute repeated flight's fused_std grew to 1.4 m.)
 - the terrain's roughness under a rangefinder, per metre flown (:func:`terrain_noise`, with the
   horizontal speed from ``GPS.Spd``): over flat ground, or hovering, the rangefinder is an
   absolute reference; over hills it tells only short-term changes. Where the speed ends (a GPS
