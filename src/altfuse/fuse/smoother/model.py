@@ -91,8 +91,10 @@ MIN_DATUM_SAMPLES = 3
 class Regressor:
     """A constant state that enters one sensor's measurement as ``coef * state``, with a
     zero-mean prior of standard deviation ``prior``: a barometer's temperature coefficient
-    (``coef``: its temperature change [degC]), or its scale error (``coef``: the height, as
-    smoothed without it; :func:`scale_regressors`). (Tried and dropped, measured: the scale
+    (``coef``: its temperature change [degC]), its scale error (``coef``: the height, as
+    smoothed without it; :func:`scale_regressors`), or its dynamic-pressure coefficient
+    (``coef``: the dynamic head ``V^2 / 2g`` [m]; :func:`dynamic_regressors`); the GPS's
+    vertical velocity's lag (:mod:`.velocity`). (Tried and dropped, measured: the scale
     error of every barometer, ``coef`` its own reading, which a GPS's wander confounds on a
     climb, 92 m climb 0.047 -> 0.100 m RMSE, and which a barometer explains away with a
     scale error of 1, a PX4 log 0.006 -> 1.03 m; a sensor's lag, ``coef`` minus the velocity,
