@@ -233,13 +233,22 @@ def test_passes_run_at_once_give_the_passes_run_one_by_one() -> None:
     ev, layout, r = toy(0, accel=True)
     ev = replace(ev, gate=1.5)  # a gate that rejects some samples, differently per model
     plain = Layout(np.ones(M), ())
-    together = likelihoods((ev, r, layout), (ev, r, plain), (ev, r * 4, plain))
-    alone = [likelihood(ev, r, layout), likelihood(ev, r, plain), likelihood(ev, r * 4, plain)]
+    # its regressors shared with ``layout``'s (their coefficients are), not its states' count
+    steady = replace(layout, drifting=())
+    models = [(ev, r, layout), (ev, r, plain), (ev, r * 4, plain), (ev, r, steady)]
+    together = likelihoods(*models)
+    alone = [likelihood(*model) for model in models]
     assert len({int(one["accepted"].sum()) for one in alone}) > 1
     for mine, theirs in zip(together, alone, strict=True):
         assert mine.keys() == theirs.keys()
         for key in mine:
             np.testing.assert_array_equal(mine[key], theirs[key])
+
+
+def test_rows_of_h_refuse_another_layout_s_coefficients() -> None:
+    ev, layout, _ = toy(0, accel=False)
+    with pytest.raises(ValueError, match="coefficients"):
+        measurement_rows(layout, ev.who, np.zeros((2, ev.who.size)))
 
 
 @pytest.mark.parametrize("keep", [FOR_EM, FOR_RESULT, HEIGHTS], ids=["em", "result", "heights"])

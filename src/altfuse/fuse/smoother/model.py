@@ -472,6 +472,9 @@ def measurement_rows(layout: Layout, who: np.ndarray, coef: FloatArray | None = 
     ).reshape(-1, 2)
     if coef is None:
         coef = regressor_coefficients(layout.regressors, who.size)
+    elif coef.shape != (len(layout.regressors), who.size):
+        # the kernels index it without a check: another layout's would be read silently
+        raise ValueError(f"coefficients {coef.shape} for {len(layout.regressors)} regressors")
     return base, regs, coef
 
 
