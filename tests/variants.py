@@ -29,6 +29,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from altfuse.inertial import G
 from altfuse.model import FlightLog, Series
 
 ALTITUDE = ("gps", "baro", "rangefinder")
@@ -73,7 +74,7 @@ def _regained(s: Series, _rng: np.random.Generator, _: str) -> Series:
 def _airflow(s: Series, speed: Series, k: float) -> Series:
     """``k V^2 / 2g`` higher, ``V`` the ground ``speed`` at its samples."""
     v = np.interp(s.t, speed.t, speed.value)
-    return replace(s, value=s.value + k * v**2 / (2.0 * 9.80665))
+    return replace(s, value=s.value + k * v**2 / (2.0 * G))
 
 
 def _noisy(s: Series, rng: np.random.Generator, _: str) -> Series:

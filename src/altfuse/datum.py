@@ -701,16 +701,15 @@ def _scale(
     changes = (
         np.column_stack([dx[ok], np.ones(int(ok.sum()))]), dy[ok], [math.inf, drift_per_span], 1.0
     )  # fmt: skip
-    fits = None
+    told = None
     if head is not None:
-        fits = _told(((head[both], levels), (np.diff(head[::k])[ok], changes)))
-        levels, changes = fits or (levels, changes)
-    fit, change = _robust_fit(*levels), _robust_fit(*changes)
+        told = _told(((head[both], levels), (np.diff(head[::k])[ok], changes)))
+    fit, change = told or (_robust_fit(*levels), _robust_fit(*changes))
     if fit is None or change is None:
         return Scale(1.0, None, reference, "not estimated: no vertical range", False)
-    scale = float(fit[0])
-    std = max(fit[1], change[1])
-    beside = " beside its dynamic pressure" if fits else ""
+    scale = float(fit[0][0])
+    std = max(float(fit[1][0]), float(change[1][0]))
+    beside = " beside its dynamic pressure" if told else ""
     label = f"{scale:.4f} +- {std:.4f} against {reference}{beside}"
     if not std <= MAX_SCALE_STD:
         how = f"not applied: {label}: too little vertical range to tell"
@@ -724,35 +723,36 @@ def _scale(
 
 
 #: A least-squares problem for :func:`_robust_fit`: design, observations, priors, rows per
-#: independent one.
+#: independent one; and its solution: the coefficients and their standard errors.
 _Fit = tuple[FloatArray, FloatArray, list[float], float]
+_Solved = tuple[FloatArray, FloatArray]
 
 
-def _told(fits: Sequence[tuple[FloatArray, _Fit]]) -> tuple[_Fit, ...] | None:
-    """Each fit with its column of the dynamic head (``fits``: that column and the fit
+def _told(fits: Sequence[tuple[FloatArray, _Fit]]) -> list[_Solved] | None:
+    """Each fit solved with its column of the dynamic head (``fits``: that column and the fit
     without it) where every one tells the head's coefficient from 0 by DYNAMIC_SIGMAS of its
     standard error; None where one does not. The levels' fit alone took a real receiver's
     wander (0.3 m noisy and walking) for a head 3 sigma from 0 in a 305 m climb, and the
     scale it left was 0.7 % off (2 m at the top)."""
-    out = []
+    out: list[_Solved] = []
     for head, (design, y, prior, per_independent) in fits:
-        first = np.column_stack([head, design])
-        told = _robust_fit(first, y, [DYNAMIC_PRIOR, *prior], per_independent)
-        if told is None or not abs(told[0]) > DYNAMIC_SIGMAS * told[1]:
+        with_head = np.column_stack([design, head])
+        solved = _robust_fit(with_head, y, [*prior, DYNAMIC_PRIOR], per_independent)
+        if solved is None or not abs(solved[0][-1]) > DYNAMIC_SIGMAS * solved[1][-1]:
             return None
-        out.append((np.column_stack([design, head]), y, [*prior, DYNAMIC_PRIOR], per_independent))
-    return tuple(out)
+        out.append(solved)
+    return out
 
 
 def _robust_fit(
     design: FloatArray, y: FloatArray, prior: Sequence[float], per_independent: float = 1.0
-) -> tuple[float, float] | None:
-    """The first coefficient of ``y ~ design`` by least squares, with a zero-mean normal prior
-    of standard deviation ``prior[j]`` on coefficient ``j`` (``inf``: none), refitted twice
-    without the residuals beyond 3 sigma (and ``SCALE_MIN_OUTLIER_M``), and its standard
-    error, the residuals' variance counted ``per_independent`` times (correlated residuals:
+) -> _Solved | None:
+    """The coefficients of ``y ~ design`` by least squares, with a zero-mean normal prior of
+    standard deviation ``prior[j]`` on coefficient ``j`` (``inf``: none), refitted twice
+    without the residuals beyond 3 sigma (and ``SCALE_MIN_OUTLIER_M``), and their standard
+    errors, the residuals' variance counted ``per_independent`` times (correlated residuals:
     rows per independent one); None when too few rows are left or the design cannot tell the
-    coefficient."""
+    coefficients."""
     keep = np.ones(y.size, dtype=bool)
     precision = np.diag(1.0 / np.asarray(prior, dtype=np.float64) ** 2)
     sigma = math.inf  # the first fit has no prior to weigh against
@@ -773,7 +773,7 @@ def _robust_fit(
         return None
     residual = max(float(np.sum(r[keep] ** 2)) / (n - p), 1e-12) * per_independent
     normal = design[keep].T @ design[keep] / residual + precision
-    return float(coef[0]), math.sqrt(float(np.linalg.inv(normal)[0, 0]))
+    return coef, np.sqrt(np.diag(np.linalg.inv(normal)))
 
 
 def referred_samples(sensors: Sequence[Series], referred: Referred) -> tuple[Samples, ...]:

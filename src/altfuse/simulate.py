@@ -460,6 +460,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     # GPS time (week and ms of week) once fixed, 0 before, as receivers report it
     gms = np.where(fix, GPS_MS_OF_WEEK + np.round((BOOT_S + ts) * 1000), 0)
     climb = np.gradient(p.height_m, DT_S)
+    speed = np.abs(np.gradient(p.distance_m, DT_S))  # over the ground, horizontal
     # the velocity's noise from its own stream: every other sensor's draw stays as it was
     climb_noise = np.random.default_rng((seed, 1)).normal(0.0, GPS_VZ_SIGMA_M_S, ts.size)
     log(
@@ -474,7 +475,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         HOME_LAT,
         HOME_LNG,
         alt,
-        sensed(ts, np.abs(np.gradient(p.distance_m, DT_S)), gps_lag),
+        sensed(ts, speed, gps_lag),
         0.0,
         -(sensed(ts, climb, gps_lag) + climb_noise),
         0.0,
@@ -490,7 +491,6 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     if "baro-drift" in faults:
         alt = alt + 0.05 * np.clip(ts - 0.4 * duration, 0.0, None)
     if "baro-airflow" in faults:
-        speed = np.abs(np.gradient(p.distance_m, DT_S))
         alt = alt + BARO_AIRFLOW_M * (sensed(ts, speed) / speed.max()) ** 2
     log("BARO", ts, 0, alt, temp, 1)
 

@@ -585,11 +585,12 @@ def _layout(
     span stands still, ``standing``; a GPS's bounded, of correlation time ``correlation_s``),
     each barometer's temperature coefficient (with a sensor other than a barometer), and the
     vertical velocity's lag where the accelerometer (``accel``) tells it; and the barometers'
-    dynamic-pressure coefficients, offered to a test of their own
-    (:func:`.evidence.dynamic_evidence`)."""
+    dynamic-pressure coefficients (with a sensor other than a barometer), offered to a test of
+    their own (:func:`.evidence.dynamic_evidence`)."""
     times, who, position = events
     samples = inputs.samples
-    alone = set(inputs.kinds) == {"baro"}  # nothing to tell a temperature from the height
+    # barometers alone: nothing tells a temperature or a dynamic head from the height
+    alone = set(inputs.kinds) == {"baro"}
     regressors = [] if alone else thermal_regressors(inputs.temperatures, samples, who, position)
     if accel is not None and (who == VELOCITY).any():
         regressors.append(lag_regressor(who, times, accel))
@@ -600,6 +601,8 @@ def _layout(
         bounded=tuple(i for i, k in enumerate(inputs.kinds) if k == "gps"),
         correlation_s=correlation_s,
     )
+    if alone:
+        return layout, []
     return layout, dynamic_regressors(inputs.speed, samples, inputs.kinds, (who, position))
 
 

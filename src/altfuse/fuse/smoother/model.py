@@ -218,10 +218,7 @@ def dynamic_regressors(
 ) -> list[Regressor]:
     """A dynamic-pressure coefficient for each barometer (prior DYNAMIC_PRIOR): ``coef`` its
     dynamic head ``V^2 / 2g`` [m] at its samples (:func:`altfuse.datum.dynamic_head`, from the
-    ground ``speed``); none with no sensor but barometers (nothing tells the head from the
-    height). ``events``: their series and positions."""
-    if set(kinds) <= {"baro"}:
-        return []
+    ground ``speed``). ``events``: their series and positions."""
     who, position = events
     out = []
     for i, kind in enumerate(kinds):
