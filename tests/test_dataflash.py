@@ -120,6 +120,21 @@ def test_ctun_fallbacks_and_multi_instance_gps() -> None:
     assert any("CTUN.BAlt" in note for note in flight.notes)
 
 
+def test_the_gps_course_is_read_beside_its_speed() -> None:
+    """GPS.GCrs [deg] of the records GPS.Spd is read from (the first receiver, a 3D fix), as
+    pymavlink decodes them: the ground velocity's direction for the barometer's airspeed."""
+    path = shared_log("ardupilot/spark404_log.bin")
+    flight = read_log(path)
+    speed, course = flight.ground_speed, flight.ground_course
+    assert speed is not None
+    assert course is not None
+    assert course.source == "GPS.GCrs"
+    np.testing.assert_array_equal(course.t, speed.t)
+    logged = pymavlink_records(path, "GPS", "GCrs")
+    np.testing.assert_allclose(course.value, [logged[round(t, 6)][0] for t in course.t])
+    assert 0.0 <= course.value.min() < course.value.max() <= 360.0
+
+
 def test_a_gps_is_read_from_when_its_receiver_first_reports_a_converged_fix() -> None:
     """The log starts as its GPS gets a 3D fix: GPA.VAcc 12.5 m, 7.5 m 2.2 s later. Its
     samples (and speeds) until then are dropped, counted; the rest are kept, poorer reports

@@ -221,6 +221,23 @@ def test_a_log_with_no_take_off_knows_its_datum() -> None:
     assert 0.005 < np.nanmedian(sigma) < 0.05
 
 
+def test_the_gps_course_is_its_velocity_s_direction() -> None:
+    """PX4 logs the GPS's velocity north and east: the course over ground is their direction
+    [deg from north], on the samples the speed is read from."""
+    path = shared_log("px4/px4_sitl_yuneec_position.ulg")
+    flight = read_log(path)
+    speed, course = flight.ground_speed, flight.ground_course
+    assert speed is not None
+    assert course is not None
+    np.testing.assert_array_equal(course.t, speed.t)
+    (gps,) = [d for d in ULog(str(path), ["vehicle_gps_position"]).data_list if d.multi_id == 0]
+    north, east = gps.data["vel_n_m_s"], gps.data["vel_e_m_s"]
+    expected = np.degrees(np.arctan2(east, north)) % 360.0
+    at = np.searchsorted(gps.data["timestamp"] / 1e6, course.t - 1e-7)
+    np.testing.assert_allclose(course.value, expected[at], atol=1e-4)
+    assert (speed.value > 1.0).sum() > 40  # 47 samples moving: the course tells there
+
+
 def test_the_land_detector_holds_a_vehicle_on_the_ground_still() -> None:
     """PX4's vehicle_land_detected says the simulator's vehicle stood on the ground throughout:
     the smoother holds v = 0 there (2 s in from each end of the verdict), where the
@@ -267,6 +284,6 @@ def test_a_gps_is_read_from_its_first_epv_of_a_converged_fix(
     after = next(s for s in settled.sensors if s.kind == "gps")
     assert after.dropped == {**before.dropped, NOT_CONVERGED: 10}
     np.testing.assert_array_equal(after.t, before.t[10:])
-    for speeds in ("vertical_velocity", "ground_speed"):
+    for speeds in ("vertical_velocity", "ground_speed", "ground_course"):
         was, now = getattr(plain, speeds), getattr(settled, speeds)
         np.testing.assert_array_equal(now.t, was.t[was.t >= after.t[0]])

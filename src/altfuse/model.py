@@ -15,7 +15,9 @@ FloatArray = npt.NDArray[np.float64]
 SensorKind = Literal["baro", "gps", "rangefinder"]
 SENSOR_KINDS: tuple[SensorKind, ...] = get_args(SensorKind)
 #: What a series is: an altitude source, or a reference, speed or temperature beside them.
-SeriesKind = Literal[SensorKind, "reference", "speed", "velocity", "temperature", "landed"]
+SeriesKind = Literal[
+    SensorKind, "reference", "speed", "course", "velocity", "temperature", "landed"
+]
 
 
 def sensor_kind(kind: SeriesKind) -> SensorKind:
@@ -183,6 +185,7 @@ class FlightLog:
     dropped_sources: dict[str, str] = field(default_factory=dict)
     params: dict[str, float] = field(default_factory=dict)
     ground_speed: Series | None = None  # horizontal speed [m/s], kind "speed"
+    ground_course: Series | None = None  # course over the ground [deg from north], "course"
     vertical_velocity: Series | None = None  # a GPS's vertical velocity up [m/s], "velocity"
     vibration: Vibration | None = None
     landed: Series | None = None  # the autopilot's own verdict: 1 on the ground, 0 flying
@@ -199,5 +202,6 @@ class FlightLog:
         log where it draws no figure and evaluates nothing (50 MB of a 300 MB log's)."""
         return replace(
             self, references=(), imu=None, attitude=None, ground_speed=None,
-            vertical_velocity=None, vibration=None, landed=None, temperatures={},
+            ground_course=None, vertical_velocity=None, vibration=None, landed=None,
+            temperatures={},
         )  # fmt: skip

@@ -551,11 +551,13 @@ def _read_references(rec: _Records) -> list[Series]:
 def _read_gps_field(
     rec: _Records, col: str, not_yet: dict[str, npt.NDArray[np.bool_]], sign: float = 1.0
 ) -> Series | None:
-    """``sign`` times ``col`` [m/s] of the first GPS instance with a 3D fix: its horizontal
-    speed over ground (``Spd``), or its vertical velocity up (``-VZ``: ArduPilot logs it down);
-    not its records from before its fix converged (``not_yet``, per GPS type)."""
+    """``sign`` times ``col`` of the first GPS instance with a 3D fix: its horizontal speed
+    over ground (``Spd`` [m/s]), its course over ground (``GCrs`` [deg]), or its vertical
+    velocity up (``-VZ`` [m/s]: ArduPilot logs it down); not its records from before its fix
+    converged (``not_yet``, per GPS type)."""
     meaning: dict[str, tuple[str, SeriesKind, str]] = {
         "Spd": ("ground_speed", "speed", "horizontal"),
+        "GCrs": ("ground_course", "course", "from north"),
         "VZ": ("gps_velocity_up", "velocity", "up"),
     }
     name, kind, datum = meaning[col]
@@ -670,6 +672,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     references = tuple(_read_references(rec))
     rec.done("XKF1", "NKF1", "ORGN", "AHR2", "POS", "CTUN", "SIM")
     speed = _read_gps_field(rec, "Spd", b.not_converged)
+    course = _read_gps_field(rec, "GCrs", b.not_converged)
     climb = _read_gps_field(rec, "VZ", b.not_converged, sign=-1.0)
     rec.done("GPS", "GPS2", "GPS3")
     skipped = rec.index.size - rec.index.decoded_bytes
@@ -695,6 +698,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
         dropped_sources=b.dropped_sources,
         params=_params(rec),
         ground_speed=speed,
+        ground_course=course,
         vertical_velocity=climb,
         vibration=vibration,
         landed=_read_landed(rec),

@@ -169,6 +169,7 @@ def read_ulog(path: str | Path) -> FlightLog:
         dropped_sources=sensors.dropped,
         params=params,
         ground_speed=sensors.speed,
+        ground_course=sensors.course,
         vertical_velocity=sensors.climb,
         landed=_landed(topics),
         temperatures=sensors.temperatures,
@@ -202,6 +203,7 @@ class _Sensors:
     dropped: dict[str, str] = field(default_factory=dict)
     temperatures: dict[str, Series] = field(default_factory=dict)
     speed: Series | None = None
+    course: Series | None = None
     climb: Series | None = None
 
     def add(  # noqa: PLR0913 (what one source is, by name)
@@ -253,6 +255,10 @@ def _read_gps(topics: _Topics, sensors: _Sensors) -> None:
         if k == 0 and "vel_m_s" in d:
             sensors.speed = _series("ground_speed", "speed", f"{topic}[0].vel_m_s", "horizontal",
                                     t, d["vel_m_s"], fixed)  # fmt: skip
+        if k == 0 and "vel_n_m_s" in d and "vel_e_m_s" in d:
+            course = np.degrees(np.arctan2(d["vel_e_m_s"], d["vel_n_m_s"])) % 360.0
+            sensors.course = _series("ground_course", "course", f"{topic}[0].vel_n/e_m_s",
+                                     "from north", t, course, fixed)  # fmt: skip
         if k == 0 and "vel_d_m_s" in d:
             valid = fixed & (d["vel_ned_valid"] != 0) if "vel_ned_valid" in d else fixed
             sensors.climb = _series("gps_velocity_up", "velocity", f"{topic}[0].-vel_d_m_s", "up",
