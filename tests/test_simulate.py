@@ -191,6 +191,22 @@ def test_a_barometer_in_the_airflow_reads_high_as_the_square_of_the_speed(tmp_pa
     assert rmse["smoother"] < 0.1
 
 
+def test_the_gps_course_follows_the_mission_out_and_back() -> None:
+    """GPS.GCrs: the mission's track runs north and back south, its course 0 then 180 deg
+    where it flies (0 standing), lagging as the speed does."""
+    flight = read_log(ROOT / "sample_logs" / "mission.bin")
+    speed, course = flight.ground_speed, flight.ground_course
+    assert speed is not None
+    assert course is not None
+    np.testing.assert_array_equal(course.t, speed.t)
+    assert set(np.unique(course.value)) == {0.0, 180.0}
+    flying = speed.value > 1.0
+    turn = course.t[flying & (course.value == 180.0)][0]
+    assert (course.value[flying & (course.t < turn)] == 0.0).all()
+    assert (course.value[flying & (course.t >= turn)] == 180.0).all()
+    assert turn - course.t[flying][0] == pytest.approx(85.0 / 2, abs=1.0)  # half of 85 s flown
+
+
 def test_a_roll_flip_wraps_the_logged_roll_and_keeps_the_vertical_acceleration(
     tmp_path: Path,
 ) -> None:

@@ -6,7 +6,8 @@ sensor behind the truth by a latency drawn per flight from ``LATENCY_S`` (as the
 simulators' sensors lag their own), the GPS by a further lag drawn from ``GPS_LAG_S``:
 
 - GPS, 5 Hz, altitude AMSL (home at ``HOME_AMSL_M``), lagging, white noise plus a slow random
-  walk; no fix (Status 1, altitude 12 m off) for its first 3 s. Its ground speed (``Spd``) and
+  walk; no fix (Status 1, altitude 12 m off) for its first 3 s. Its ground speed (``Spd``), its
+  course (``GCrs``: every flight's track runs north, 0, and back, 180), and
   vertical velocity (``VZ``, down) with the same lag (a receiver reports them for one epoch;
   ArduPilot's EKF3 applies one ``EK3_GPS_DELAY`` to all), the velocity with
   ``GPS_VZ_SIGMA_M_S`` of white noise.
@@ -460,7 +461,8 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     # GPS time (week and ms of week) once fixed, 0 before, as receivers report it
     gms = np.where(fix, GPS_MS_OF_WEEK + np.round((BOOT_S + ts) * 1000), 0)
     climb = np.gradient(p.height_m, DT_S)
-    speed = np.abs(np.gradient(p.distance_m, DT_S))  # over the ground, horizontal
+    along = np.gradient(p.distance_m, DT_S)  # the ground velocity along the track, north
+    speed = np.abs(along)  # over the ground, horizontal
     # the velocity's noise from its own stream: every other sensor's draw stays as it was
     climb_noise = np.random.default_rng((seed, 1)).normal(0.0, GPS_VZ_SIGMA_M_S, ts.size)
     log(
@@ -476,7 +478,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         HOME_LNG,
         alt,
         sensed(ts, speed, gps_lag),
-        0.0,
+        np.where(sensed(ts, along, gps_lag) < 0.0, 180.0, 0.0),  # the course, deg from north
         -(sensed(ts, climb, gps_lag) + climb_noise),
         0.0,
         1,
