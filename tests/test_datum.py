@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from altfuse.align import Aligned
-from altfuse.datum import dynamic_head, refer_to_takeoff, referred_samples
+from altfuse.datum import Track, dynamic_head, refer_to_takeoff, referred_samples
 from altfuse.fuse import FusionInput
 from altfuse.fuse.support import SupportParams, fuse_support
 from altfuse.model import Samples, Series
@@ -219,12 +219,64 @@ def test_a_barometer_s_scale_is_found_beside_its_dynamic_pressure() -> None:
     alone = {o.name: o for o in refer_to_takeoff(aligned).offsets}["baro"]
     assert alone.scale_estimate == pytest.approx(1.078, abs=0.01)
     speed = Samples(t, v)
-    baro_scale = {o.name: o for o in refer_to_takeoff(aligned, speed=speed).offsets}["baro"]
+    track = Track(speed)
+    baro_scale = {o.name: o for o in refer_to_takeoff(aligned, track=track).offsets}["baro"]
     assert baro_scale.scale_applied
     assert baro_scale.scale == pytest.approx(1.05, abs=0.003)
     assert "against gps beside its dynamic pressure over the flight" in str(baro_scale.scale_method)
     assert dynamic_head(speed, t) == pytest.approx(head)
     assert dynamic_head(Samples(t, v / 3), t) is None  # 2.7 m/s at most: 0.36 m, too little
+
+
+def _out_and_back(wind_north: float) -> tuple[Aligned, Track]:
+    """A climb to 50 m, a cruise north at 8 m/s there and back south, the barometer 5 % high
+    and reading ``0.8 |V - W|^2 / 2g`` higher in a wind ``W`` blowing north at
+    ``wind_north``; the GPS's heights, and its speed and course (0 out, 180 back)."""
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 200.0, 0.1)
+    h = np.interp(t, [0, 20, 60, 140, 180, 200], [0, 0, 50, 50, 0, 0])
+    north = np.interp(t, [0, 65, 75, 95, 105, 125, 135, 200], [0, 0, 8, 8, -8, -8, 0, 0])
+    air = np.abs(north - wind_north)
+    baro = 2.0 + 1.05 * h + 0.8 * air**2 / (2 * 9.80665) + rng.normal(0, 0.1, t.size)
+    gps = 500 + h + rng.normal(0, 0.02, t.size)
+    names = ("gps", "baro")
+    aligned = Aligned(t, names, names, np.column_stack([gps, baro]), 10.0, 1.0, "union", {})
+    course = np.where(north < 0, 180.0, 0.0)
+    return aligned, Track(Samples(t, np.abs(north)), Samples(t, course))
+
+
+def test_a_wind_is_found_beside_the_dynamic_pressure() -> None:
+    """Out and back in a 3 m/s wind from the south: 5 and 11 m/s through the air at one
+    ground speed, the barometer 1.0 and 4.9 m high. With the course the fit finds the wind
+    (the ground velocity's north component beside the head) and the scale; the airspeed it
+    leaves is the truth's. Without the course, the ground speed alone tells no head."""
+    aligned, track = _out_and_back(3.0)
+    baro = {o.name: o for o in refer_to_takeoff(aligned, track=track).offsets}["baro"]
+    wind = refer_to_takeoff(aligned, track=track).wind
+    assert wind is not None
+    assert wind.north_m_s == pytest.approx(3.0, abs=0.2)
+    assert wind.east_m_s == 0.0  # the track has no east: nothing told, nothing assumed
+    assert wind.std_m_s < 0.2
+    assert "in a wind of 3.0" in str(baro.scale_method)
+    assert "from 180 deg" in str(baro.scale_method)
+    assert baro.scale == pytest.approx(1.05, abs=0.003)
+    assert track.course is not None
+    north = np.where(track.course.value == 180.0, -1.0, 1.0) * track.speed.value
+    air = track.airspeed(wind)
+    np.testing.assert_allclose(air.value, np.abs(north - wind.north_m_s), atol=1e-12)
+    ground = {o.name: o for o in refer_to_takeoff(aligned, track=Track(track.speed)).offsets}
+    assert "dynamic pressure" not in str(ground["baro"].scale_method)  # told by neither fit
+    assert abs(baro.scale - 1.05) < abs(ground["baro"].scale - 1.05) / 4  # 0.0001 and 0.0043
+
+
+def test_no_wind_is_told_where_the_air_is_still() -> None:
+    """The same flight in still air: the course changes nothing, no wind is told."""
+    aligned, track = _out_and_back(0.0)
+    with_course = refer_to_takeoff(aligned, track=track)
+    without = refer_to_takeoff(aligned, track=Track(track.speed))
+    assert with_course.wind is None
+    assert with_course.offsets == without.offsets
+    assert track.airspeed(None) is track.speed
 
 
 @pytest.mark.parametrize("gps", [False, True])
@@ -417,11 +469,11 @@ def test_a_segment_resumed_in_a_cruise_that_climbs_keeps_the_main_datum() -> Non
     z = aligned.z + climb[:, None]
     aligned = Aligned(t, aligned.names, aligned.kinds, z, 10.0, 1.0, "union", {})
     flying = Samples(t, np.where(t >= 110, 5.0, 0.0))
-    ref = refer_to_takeoff(aligned, splices=[110.0], speed=flying)
+    ref = refer_to_takeoff(aligned, splices=[110.0], track=Track(flying))
     assert ref.segments[1].datum == "the main segment's offsets (no take-off in it)"
     gps = ref.h[:, 0]
     late = t >= 150
     assert np.nanmedian(gps[late] - (h + climb)[late]) == pytest.approx(0.0, abs=0.3)
     standing = Samples(t, np.where((t >= 110) & (t < 135), 0.2, 5.0))
-    own = refer_to_takeoff(aligned, splices=[110.0], speed=standing)
+    own = refer_to_takeoff(aligned, splices=[110.0], track=Track(standing))
     assert own.segments[1].datum.startswith("its own, ground before take-off at 13")

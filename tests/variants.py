@@ -19,7 +19,9 @@ and alignment:
 - ``airflow-<k>``: a copter's barometers ``k V^2 / 2g`` higher at its ground speed ``V`` (the
   static pressure lowered by ``k`` times the dynamic pressure, as real copters' barometers
   read in forward flight: :data:`altfuse.datum.DYNAMIC_PRIOR`; 1.3 m at 5 m/s where ``k`` is
-  1); a plane's as logged (its static port: ``k`` 1 would be 108 m at the 3.3 plane's 46 m/s).
+  1); a plane's as logged (its static port: ``k`` 1 would be 108 m at the 3.3 plane's 46 m/s);
+- ``windy-<w>``: the same with ``k`` 1 at the airspeed in a steady wind of ``w`` m/s blowing
+  to the east (the ground velocity from the GPS's speed and course, less the wind).
 """
 
 from __future__ import annotations
@@ -29,8 +31,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from altfuse.datum import Track, Wind
 from altfuse.inertial import G
-from altfuse.model import FlightLog, Series
+from altfuse.model import FlightLog, Samples, Series
 
 ALTITUDE = ("gps", "baro", "rangefinder")
 
@@ -71,9 +74,11 @@ def _regained(s: Series, _rng: np.random.Generator, _: str) -> Series:
     return stepped(replace(s, t=s.t[keep], value=s.value[keep]), 2.0)
 
 
-def _airflow(s: Series, speed: Series, k: float) -> Series:
-    """``k V^2 / 2g`` higher, ``V`` the ground ``speed`` at its samples."""
-    v = np.interp(s.t, speed.t, speed.value)
+def _airflow(s: Series, track: Track, k: float, east_m_s: float = 0.0) -> Series:
+    """``k V^2 / 2g`` higher, ``V`` the airspeed at its samples: the ground velocity (the
+    ``track``'s speed and course) less a wind of ``east_m_s`` blowing to the east."""
+    air = track.airspeed(Wind(0.0, east_m_s, 0.0))
+    v = np.interp(s.t, air.t, air.value)
     return replace(s, value=s.value + k * v**2 / (2.0 * G))
 
 
@@ -110,11 +115,13 @@ def variant(flight: FlightLog, how: str, seed: int = 1) -> FlightLog:
             if (series := getattr(flight, field)) is not None
         }
         return replace(_each(flight, "gps", lambda s: _thinned(s, rng, arg)), **speeds)
-    if what == "airflow":
-        speed = flight.ground_speed
-        if flight.vehicle != "copter" or speed is None:
+    if what in ("airflow", "windy"):
+        speed, course = flight.ground_speed, flight.ground_course
+        if flight.vehicle != "copter" or speed is None or course is None:
             return flight
-        return _each(flight, "baro", lambda s: _airflow(s, speed, float(arg)))
+        track = Track(Samples(speed.t, speed.value), Samples(course.t, course.value))
+        k, wind = (float(arg), 0.0) if what == "airflow" else (1.0, float(arg))
+        return _each(flight, "baro", lambda s: _airflow(s, track, k, wind))
     if what not in CHANGES or not arg:
         raise ValueError(f"unknown variant {how!r}")
     kinds, change = CHANGES[what]

@@ -115,6 +115,16 @@ DYNAMIC_PRIOR = 1.0
 #: many standard errors from 0.
 DYNAMIC_MIN_M = 0.5
 DYNAMIC_SIGMAS = 3.0
+#: The air moves: the barometer feels the airspeed ``|V - W|``, ``V`` the ground velocity (the
+#: GPS's speed along its course) and ``W`` the wind, whose components have a zero-mean prior of
+#: this [m/s] in the scale's fit. ``k |V - W|^2 / 2g = k V^2 / 2g - k W.V / g + k |W|^2 / 2g``
+#: is linear in ``k`` and ``k W``: the fit takes ``V_north / g`` and ``V_east / g`` as columns
+#: beside the head (the constant joins the offset), and ``W`` is told where it lies
+#: DYNAMIC_SIGMAS of its standard error from 0.
+WIND_PRIOR_M_S = 5.0
+#: A receiver's velocity resolution [m/s] (centimetres per second): a component of the ground
+#: velocity never beyond it is none (a column of zeros would leave the fit nothing to solve).
+TRACK_RESOLUTION_M_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -151,15 +161,70 @@ class Offset:
 
 
 @dataclass(frozen=True)
+class Track:
+    """The GPS's horizontal motion: its ground ``speed`` [m/s] and, where the log has it, its
+    ``course`` over the ground [deg from north], read from the same records."""
+
+    speed: Samples
+    course: Samples | None = None
+
+    def components(self, t: FloatArray) -> FloatArray | None:
+        """The ground velocity's north and east components [m/s] at the times ``t`` (``(2,
+        n)``, interpolated as components, not as an angle that wraps); None without a
+        course."""
+        if self.course is None:
+            return None
+        course = np.radians(_at(self.course, self.speed.t, period=360.0))
+        speed = np.nan_to_num(self.speed.value)
+        north, east = speed * np.cos(course), speed * np.sin(course)
+        return np.asarray([_at(Samples(self.speed.t, c), t) for c in (north, east)])
+
+    def airspeed(self, wind: Wind | None) -> Samples:
+        """The speed through the air at the GPS's samples, ``|V - W|``: the ground speed
+        where there is no ``wind`` (or no course)."""
+        ne = None if wind is None else self.components(self.speed.t)
+        if wind is None or ne is None:
+            return self.speed
+        return Samples(self.speed.t, np.hypot(ne[0] - wind.north_m_s, ne[1] - wind.east_m_s))
+
+
+def _at(samples: Samples, t: FloatArray, period: float | None = None) -> FloatArray:
+    """``samples`` linearly interpolated at the times ``t`` (NaN read as 0; an angle of that
+    ``period`` unwrapped first)."""
+    order = np.argsort(samples.t, kind="stable")
+    value = np.nan_to_num(samples.value[order])
+    if period is not None:
+        value = np.unwrap(value, period=period)
+    return np.asarray(np.interp(t, samples.t[order], value))
+
+
+@dataclass(frozen=True)
+class Wind:
+    """A steady wind [m/s] (the air's velocity: blowing towards north and east), as a
+    barometer's dynamic pressure beside the GPS's ground velocity tells it (:func:`_wind`)."""
+
+    north_m_s: float
+    east_m_s: float
+    std_m_s: float  # the larger component's standard error
+
+    def __str__(self) -> str:
+        speed = math.hypot(self.north_m_s, self.east_m_s)
+        origin = math.degrees(math.atan2(-self.east_m_s, -self.north_m_s)) % 360.0
+        return f"a wind of {speed:.1f} +- {self.std_m_s:.1f} m/s from {origin:.0f} deg"
+
+
+@dataclass(frozen=True)
 class Scale:
     """A barometer's scale against a GPS or a rangefinder (the reference):
-    ``z_baro - c = scale * h_ref + b`` over the flight."""
+    ``z_baro - c = scale * h_ref + b`` over the flight; and the wind its dynamic pressure told
+    (None: none told)."""
 
     scale: float
     std: float | None  # None: not estimated
     reference: str
     how: str
     applied: bool
+    wind: Wind | None = None
 
 
 @dataclass(frozen=True)
@@ -207,6 +272,7 @@ class Referred:
     segments: tuple[Segment, ...] = ()  # empty: the log is one segment
     on_real_ground: bool = False  # the ground window lies before a detected take-off
     steps: tuple[Step, ...] = ()  # between two sensors' heights (:mod:`altfuse.steps`)
+    wind: Wind | None = None  # the main segment's, as its barometers' scale fits told it
 
     @property
     def datum_windows(self) -> tuple[tuple[float, float] | None, ...]:
@@ -309,7 +375,7 @@ def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what t
     *,
     clearances: Mapping[str, float] | None = None,
     splices: Sequence[float] = (),
-    speed: Samples | None = None,
+    track: Track | None = None,
 ) -> Referred:
     """Subtract from each source its offset (and scale) to height above take-off, segment by
     segment (see module doc).
@@ -317,23 +383,23 @@ def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what t
     ``splices`` are the times [s] at which a new segment of the log starts (a reboot, a log
     resumed: :func:`altfuse.align.splices`). The segment with the most valid ticks is referred
     as a whole log is; another with its own take-off, from a ground window in which the GPS's
-    ground ``speed`` (where the log has one) says the vehicle stood, gets its own datum; one
-    without (a log resumed in flight) the main segment's offsets and scales.
+    ground speed (``track``, where the log has one) says the vehicle stood, gets its own datum;
+    one without (a log resumed in flight) the main segment's offsets and scales.
     """
     t = aligned.t
     cuts = [0, *np.searchsorted(t, np.asarray(splices, dtype=np.float64)).tolist(), t.size]
     pieces = [(a, b) for a, b in itertools.pairwise(cuts) if b > a]
     if len(pieces) == 1:
         return _refer_segment(
-            aligned, ground_window_s, takeoff_climb_m, referral, clearances, speed
+            aligned, ground_window_s, takeoff_climb_m, referral, clearances, track
         )
     valid = np.asarray(np.isfinite(aligned.z).any(axis=1), dtype=bool)
     main = max(pieces, key=lambda p: int(valid[p[0] : p[1]].sum()))
     options = (ground_window_s, takeoff_climb_m, referral, clearances)
     owns = {
-        (a, b): _refer_segment(aligned.part(a, b), *options, speed)
+        (a, b): _refer_segment(aligned.part(a, b), *options, track)
         if (a, b) == main
-        else _own_datum(aligned.part(a, b), *options, speed)
+        else _own_datum(aligned.part(a, b), *options, track)
         for a, b in pieces
     }
     # a barometer's scale is the sensor's, whichever segment tells it best
@@ -414,18 +480,19 @@ def _own_datum(
     takeoff_climb_m: float,
     referral: Referral,
     clearances: Mapping[str, float] | None,
-    speed: Samples | None,
+    track: Track | None,
 ) -> Referred | None:
     """A segment's own referral, where it has a take-off and a ground window before it, and
-    the vehicle stood in that window where the GPS's ground ``speed`` tells (see
+    the vehicle stood in that window where the GPS's ground speed tells (``track``; see
     ``GROUND_MAX_SPEED_M_S``)."""
     try:
-        own = _refer_segment(part, ground_window_s, takeoff_climb_m, referral, clearances, speed)
+        own = _refer_segment(part, ground_window_s, takeoff_climb_m, referral, clearances, track)
     except NoUsableSensorsError:
         return None
     if not own.on_real_ground:
         return None
-    if speed is not None:
+    if track is not None:
+        speed = track.speed
         lo, hi = own.ground_window_s
         inside = (speed.t >= lo) & (speed.t <= hi) & np.isfinite(speed.value)
         if inside.any() and np.median(speed.value[inside]) > GROUND_MAX_SPEED_M_S:
@@ -439,7 +506,7 @@ def _refer_segment(
     takeoff_climb_m: float,
     referral: Referral,
     clearances: Mapping[str, float] | None,
-    speed: Samples | None = None,
+    track: Track | None = None,
 ) -> Referred:
     """:func:`refer_to_takeoff` of one segment.
 
@@ -458,9 +525,9 @@ def _refer_segment(
         What a rangefinder reads when landed [m] by name (``RNGFNDn_GNDCLEAR``): its offset
         when it has no valid reading in the ground window (its ground readings below its
         minimum range), rather than one matched in flight to a barometer that may drift.
-    speed
-        The GPS's ground speed [m/s], where the log has one: a barometer's scale is fitted
-        beside its dynamic pressure (:func:`baro_scales`).
+    track
+        The GPS's ground speed and course, where the log has them: a barometer's scale is
+        fitted beside its dynamic pressure in a wind (:func:`baro_scales`).
     """
     ground_s, climb_m = ground_window_s, takeoff_climb_m
     t, z = aligned.t, aligned.z
@@ -499,8 +566,14 @@ def _refer_segment(
         t, h[:, referred], [aligned.names[i] for i in referred],
         [aligned.kinds[i] for i in referred],
     )  # fmt: skip
+    wind = None
     if referral == "full":
-        scales = baro_scales(aligned, h, offsets, steps, speed)
+        scales = baro_scales(aligned, h, offsets, steps, track)
+        wind = min(
+            (sc.wind for sc in scales.values() if sc.wind is not None),
+            key=lambda w: w.std_m_s,
+            default=None,
+        )
         if any(sc.applied for sc in scales.values()):
             offsets, h, dropped = _refer(aligned, ground, scales)
         for i, sc in scales.items():
@@ -526,6 +599,7 @@ def _refer_segment(
         dropped=dropped,
         on_real_ground=real,
         steps=steps,
+        wind=wind,
     )
 
 
@@ -589,10 +663,28 @@ def dynamic_head(speed: Samples | None, t: FloatArray) -> FloatArray | None:
     fast enough to tell it (DYNAMIC_MIN_M)."""
     if speed is None or speed.t.size < 2 or not t.size:
         return None
-    order = np.argsort(speed.t, kind="stable")
-    v = np.interp(t, speed.t[order], np.nan_to_num(speed.value[order]))
-    head: FloatArray = v**2 / (2.0 * G)
+    head: FloatArray = _at(speed, t) ** 2 / (2.0 * G)
     return head if head.max() >= DYNAMIC_MIN_M else None
+
+
+#: The dynamic pressure's columns of the scale's fit (:func:`_air_columns`), and which of
+#: the ground velocity's components (0 north, 1 east) follow the head's.
+_Air = tuple[FloatArray, tuple[int, ...]]
+
+
+def _air_columns(track: Track | None, t: FloatArray) -> _Air | None:
+    """The scale fit's columns of the dynamic pressure at the times ``t``: the head
+    (:func:`dynamic_head`) and, where the log has the course, ``V_north / g`` and ``V_east /
+    g`` (``WIND_PRIOR_M_S``), each where the flight has it beyond ``TRACK_RESOLUTION_M_S`` (a
+    track along a meridian has no east); None where there is no head to fit."""
+    head = None if track is None else dynamic_head(track.speed, t)
+    if track is None or head is None:
+        return None
+    ne = track.components(t)
+    if ne is None:
+        return head[:, None], ()
+    axes = tuple(int(i) for i in np.flatnonzero(np.max(np.abs(ne), axis=1) > TRACK_RESOLUTION_M_S))
+    return np.column_stack([head, *(ne[list(axes)] / G)]), axes
 
 
 def baro_scales(
@@ -600,7 +692,7 @@ def baro_scales(
     h: FloatArray,
     offsets: dict[int, Offset],
     steps: Sequence[Step] = (),
-    speed: Samples | None = None,
+    track: Track | None = None,
 ) -> dict[int, Scale]:
     """Each barometer's scale against the GPS with the most referred ticks, or against the
     rangefinder with the most where that fit's standard error is the smaller (see the module
@@ -614,9 +706,11 @@ def baro_scales(
     ``h`` holds the sources referred by offsets only. Over the ticks where both are valid,
     ``h_baro = scale * h_gps + drift * t + b`` by least squares, twice more without those beyond
     3 sigma (a glitch), with a drift in time (a barometer warming: a drift is not a scale)
-    and a constant ``b`` (a datum matched in flight); and ``+ k V^2 / 2g`` where the GPS's
-    ground ``speed`` tells ``k`` from 0 (:func:`dynamic_head`, DYNAMIC_SIGMAS: fast stretches
-    flown high read as a scale otherwise). Its standard error is the larger of that
+    and a constant ``b`` (a datum matched in flight); and ``+ k |V - W|^2 / 2g`` where the
+    GPS's ground velocity (``track``) tells ``k`` from 0 (:func:`dynamic_head`, DYNAMIC_SIGMAS:
+    fast stretches flown high read as a scale otherwise), ``W`` the wind where the log has the
+    course (WIND_PRIOR_M_S; each leg of a flight out and back in a wind feels its own airspeed
+    at one ground speed). Its standard error is the larger of that
     fit's (one sample per ``SCALE_BLOCK_S``) and the same fit's on the changes over successive
     spans (``SCALE_CHANGES``): the GPS's wander counts. Applied when that error is at most
     ``MAX_SCALE_STD``, the scale differs from 1 by ``SCALE_MIN_SIGMAS`` of it and lies in
@@ -636,7 +730,7 @@ def baro_scales(
         return {
             i: Scale(1.0, None, "", "not estimated: no GPS or rangefinder", False) for i in baros
         }
-    head = dynamic_head(speed, aligned.t)
+    air = _air_columns(track, aligned.t)
     return {
         i: min(
             (
@@ -645,7 +739,7 @@ def baro_scales(
                     (h[:, j], h[:, i]),
                     names[j],
                     _between(steps, names[i], names[j]),
-                    head,
+                    air,
                 )
                 for j in references
             ),
@@ -665,12 +759,12 @@ def _scale(
     heights: tuple[FloatArray, FloatArray],
     reference: str,
     steps: Sequence[float] = (),
-    head: FloatArray | None = None,
+    air: _Air | None = None,
 ) -> Scale:
     """``y = scale x + drift t + b`` (``heights``: ``x``, ``y``), the scale and its standard
     error (see :func:`baro_scales`); with a free step in ``y - x`` at each of ``steps`` [s],
-    and ``+ k head`` where a dynamic head is given (:func:`dynamic_head`) and both fits tell
-    ``k`` from 0 (:func:`_told`)."""
+    and the dynamic pressure's columns ``air`` (:func:`_air_columns`) where given and both
+    fits tell its ``k`` from 0 (:func:`_told`), and the wind they tell (:func:`_wind`)."""
     x, y = heights
     both = np.isfinite(x) & np.isfinite(y)
     if both.sum() < 2 * SCALE_MIN_CHANGES:
@@ -701,25 +795,31 @@ def _scale(
     changes = (
         np.column_stack([dx[ok], np.ones(int(ok.sum()))]), dy[ok], [math.inf, drift_per_span], 1.0
     )  # fmt: skip
-    told = None
-    if head is not None:
-        told = _told(((head[both], levels), (np.diff(head[::k])[ok], changes)))
+    told, wind = None, None
+    if air is not None:
+        # with the wind where the fits tell it beside the head, else the head alone
+        cols, axes = air
+        for columns, along in [(cols, axes), (cols[:, :1], ())] if axes else [air]:
+            told = _told(((columns[both], levels), (np.diff(columns[::k], axis=0)[ok], changes)))
+            wind = None if told is None else _wind(told[0], along)
+            if wind is not None:
+                break
     fit, change = told or (_robust_fit(*levels), _robust_fit(*changes))
     if fit is None or change is None:
         return Scale(1.0, None, reference, "not estimated: no vertical range", False)
     scale = float(fit[0][0])
     std = max(float(fit[1][0]), float(change[1][0]))
-    beside = " beside its dynamic pressure" if told else ""
+    beside = (" beside its dynamic pressure" + (f" in {wind}" if wind else "")) if told else ""
     label = f"{scale:.4f} +- {std:.4f} against {reference}{beside}"
     if not std <= MAX_SCALE_STD:
         how = f"not applied: {label}: too little vertical range to tell"
-        return Scale(scale, std, reference, how, False)
+        return Scale(scale, std, reference, how, False, wind)
     if abs(scale - 1.0) < SCALE_MIN_SIGMAS * std:
         how = f"not applied: {label}: not different from 1"
-        return Scale(scale, std, reference, how, False)
+        return Scale(scale, std, reference, how, False, wind)
     if not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
-        return Scale(scale, std, reference, f"not applied: {label}: implausible", False)
-    return Scale(scale, std, reference, f"{label} over the flight", True)
+        return Scale(scale, std, reference, f"not applied: {label}: implausible", False, wind)
+    return Scale(scale, std, reference, f"{label} over the flight", True, wind)
 
 
 #: A least-squares problem for :func:`_robust_fit`: design, observations, priors, rows per
@@ -729,19 +829,41 @@ _Solved = tuple[FloatArray, FloatArray]
 
 
 def _told(fits: Sequence[tuple[FloatArray, _Fit]]) -> list[_Solved] | None:
-    """Each fit solved with its column of the dynamic head (``fits``: that column and the fit
-    without it) where every one tells the head's coefficient from 0 by DYNAMIC_SIGMAS of its
-    standard error; None where one does not. The levels' fit alone took a real receiver's
-    wander (0.3 m noisy and walking) for a head 3 sigma from 0 in a 305 m climb, and the
-    scale it left was 0.7 % off (2 m at the top)."""
+    """Each fit solved with its columns of the dynamic pressure last (``fits``: those columns,
+    the head's first, and the fit without them; :func:`_air_columns`) where every one tells
+    the head's coefficient from 0 by DYNAMIC_SIGMAS of its standard error; None where one does
+    not. The levels' fit alone took a real receiver's wander (0.3 m noisy and walking) for a
+    head 3 sigma from 0 in a 305 m climb, and the scale it left was 0.7 % off (2 m at the
+    top)."""
     out: list[_Solved] = []
-    for head, (design, y, prior, per_independent) in fits:
-        with_head = np.column_stack([design, head])
-        solved = _robust_fit(with_head, y, [*prior, DYNAMIC_PRIOR], per_independent)
-        if solved is None or not abs(solved[0][-1]) > DYNAMIC_SIGMAS * solved[1][-1]:
+    for air, (design, y, prior, per_independent) in fits:
+        m = air.shape[1]
+        wind = [DYNAMIC_PRIOR * WIND_PRIOR_M_S] * (m - 1)
+        solved = _robust_fit(
+            np.column_stack([design, air]), y, [*prior, DYNAMIC_PRIOR, *wind], per_independent
+        )
+        if solved is None or not abs(solved[0][-m]) > DYNAMIC_SIGMAS * solved[1][-m]:
             return None
         out.append(solved)
     return out
+
+
+def _wind(fit: _Solved, axes: tuple[int, ...]) -> Wind | None:
+    """The wind a fit with the dynamic pressure's columns last tells (:func:`_told`; the
+    head's, then the ground velocity's components ``axes``): ``W = -(k W) / k`` from their
+    coefficients, where it lies DYNAMIC_SIGMAS of its standard error (first order in the
+    coefficients' errors) from 0; None where it does not (0 along a component the flight
+    never has, or without a course: no ``axes``)."""
+    m = len(axes)
+    if not m:
+        return None
+    (k, *kw), (k_std, *kw_std) = fit[0][-m - 1 :], fit[1][-m - 1 :]
+    wind = np.zeros(2)
+    wind[list(axes)] = -np.asarray(kw) / k
+    std = float(np.max(np.hypot(kw_std, wind[list(axes)] * k_std)) / abs(k))
+    if not math.hypot(*wind) > DYNAMIC_SIGMAS * std:
+        return None
+    return Wind(float(wind[0]), float(wind[1]), std)
 
 
 def _robust_fit(

@@ -10,7 +10,14 @@ import numpy as np
 
 from altfuse.errors import AltfuseError
 from altfuse.model import FlightLog, Series
-from altfuse.pipeline import FuseOptions, Prepared, prepare, segment_record, step_record
+from altfuse.pipeline import (
+    FuseOptions,
+    Prepared,
+    prepare,
+    segment_record,
+    step_record,
+    wind_record,
+)
 from altfuse.screen import implausible_count, screen, screened_out
 
 #: A pause between two samples longer than this counts as a gap [s].
@@ -98,6 +105,7 @@ def describe_datum(prepared: Prepared) -> dict[str, Any]:
         "takeoff_s": referred.takeoff_s,
         "segments": [segment_record(s) for s in referred.segments],
         "steps": [step_record(s) for s in referred.steps],
+        "wind": wind_record(referred.wind),
         "sensors": [
             {
                 "name": o.name,

@@ -18,6 +18,8 @@ from altfuse.datum import (
     Referral,
     Referred,
     Segment,
+    Track,
+    Wind,
     refer_to_takeoff,
     referred_samples,
     tilt_correct,
@@ -173,7 +175,7 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
         options.referral,
         clearances=ground_clearances(flight),
         splices=splices(aligned, None if flight.imu is None else flight.imu.t),
-        speed=_samples(flight.ground_speed),
+        track=_track(flight),
     )
     log.info(
         "%s: aligned %d ticks in %.2f s, datum in %.2f s",
@@ -222,6 +224,18 @@ def ground_clearances(flight: FlightLog) -> dict[str, float]:
 
 def _samples(series: Series | None) -> Samples | None:
     return None if series is None else Samples(series.t, series.value)
+
+
+def _airspeed(flight: FlightLog, wind: Wind | None) -> Samples | None:
+    """The GPS's ground velocity less the ``wind`` the datum found; None without one."""
+    track = _track(flight)
+    return None if wind is None or track is None else track.airspeed(wind)
+
+
+def _track(flight: FlightLog) -> Track | None:
+    """The GPS's ground speed and course, where the log has the speed."""
+    speed = _samples(flight.ground_speed)
+    return None if speed is None else Track(speed, _samples(flight.ground_course))
 
 
 def _on_ground(referred: Referred) -> tuple[tuple[float, float], ...]:
@@ -273,6 +287,7 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         on_ground_s=_on_ground(referred),
         splices=tuple((s.start_s, s.grounded) for s in referred.segments[1:]),
         speed=_samples(flight.ground_speed),
+        airspeed=_airspeed(flight, referred.wind),
         temperatures=tuple(_samples(temps.get(n)) for n in referred.names),
         accel=accel,
         gps_velocity_up=velocity,
@@ -373,6 +388,18 @@ def segment_record(segment: Segment) -> dict[str, Any]:
     return {**asdict(segment), "offsets": [offset_record(o) for o in segment.offsets]}
 
 
+def wind_record(wind: Wind | None) -> dict[str, Any] | None:
+    """The wind the datum found (:class:`altfuse.datum.Wind`), for the provenance."""
+    if wind is None:
+        return None
+    return {
+        "north_m_s": round(wind.north_m_s, 3),
+        "east_m_s": round(wind.east_m_s, 3),
+        "std_m_s": round(wind.std_m_s, 3),
+        "meaning": str(wind),
+    }
+
+
 def step_record(step: Step) -> dict[str, Any]:
     """A step between two sensors' heights (:mod:`altfuse.steps`), for the provenance."""
     return {
@@ -419,6 +446,8 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
             "offsets": [offset_record(o) for o in referred.offsets],
             # where two sensors' heights jump against each other (altfuse.steps)
             "steps": [step_record(st) for st in referred.steps],
+            # the air's velocity the barometers' dynamic pressure told (None: none told)
+            "wind": wind_record(referred.wind),
         },
         "sensors_used": [
             {

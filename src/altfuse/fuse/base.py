@@ -57,6 +57,9 @@ class FusionInput:
         the main segment's: every offset 0 there) or carry the main segment's offsets.
     speed
         Horizontal speed over ground [m/s] samples; None if the log has none.
+    airspeed
+        The speed through the air [m/s] at the same samples: the ground velocity less the wind
+        the datum found (:class:`altfuse.datum.Wind`); None where it found none.
     temperatures
         Each sensor's temperature [degC] samples or None, in ``z``'s order.
     accel
@@ -98,6 +101,7 @@ class FusionInput:
     on_ground_s: tuple[tuple[float, float], ...] = ()
     splices: tuple[tuple[float, bool], ...] = ()
     speed: Samples | None = None
+    airspeed: Samples | None = None
     temperatures: tuple[Samples | None, ...] = ()
     accel: VerticalAcceleration | None = None
     gps_velocity_up: Samples | None = None

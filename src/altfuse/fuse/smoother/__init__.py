@@ -118,17 +118,19 @@ From the log itself:
   had given to a temperature coefficient), a PX4 log's with 11 % of its GPS left -0.5 (gain
   14), the other two none; the simulators' fast copters with ``V^2 / 2g`` added to their
   barometers, 0.23-0.65 -> 0.013-0.019 m RMSE (with :func:`altfuse.datum.dynamic_head` in the
-  datum's scale fit too). The ground speed stands in for the airspeed: in a wind the two legs
-  of a flight out and back feel different airspeeds at one ground speed. Altfuse's mission
-  (k 0.8) with a steady wind along its track, 3 seeds: at 2 m/s taken on one (0.581 -> 0.232
-  m), at 3 m/s on two (0.493 -> 0.459, and 0.164 -> 0.438 m, k 0.13 for 0.8), at 4 m/s on
-  none; without wind 0.72-0.77 -> 0.07-0.10 m. (Tried: the airspeed as the GPS's ground
-  velocity, from ``GPS.GCrs``, less a steady wind ``W``, ``k |V - W|^2 / 2g`` being
-  ``k V^2 / 2g - V . kW / g`` and a constant, with two more states per barometer offered
-  beside the head alone: that mission in a 2-5 m/s wind 0.06-0.32 m, and the truth logs'
-  copters in a 3 m/s wind 0.005-0.028 m against 0.012-0.662, kW within 0.3 m/s; not kept,
-  as the extra per-event coefficients put the 300 MB log's peak at 1.59x the file, and the
-  45-minute repeated flight's fused_std grew to 1.4 m.)
+  datum's scale fit too). In a wind the two legs of a flight out and back feel different
+  airspeeds at one ground speed: where the datum's fit found a steady wind ``W`` beside the
+  head (:class:`altfuse.datum.Wind`, from the GPS's course), the head at the airspeed
+  ``|V - W|`` is offered beside the one at the ground speed, and the likelier taken
+  (``baro_dynamic_speed``): the truth logs' copters in a 3 m/s wind (``windy-3``), the hexa
+  0.662 -> 0.005 m; handed a wind the air did not blow, the ground speed is taken. Where the
+  datum cannot tell the wind (a GPS 0.35 m noisy and wandering: altfuse's mission, k 0.8,
+  with a steady wind along its track, 3 seeds: at 2 m/s taken on one, 0.581 -> 0.232 m, at
+  3 m/s on two, 0.493 -> 0.459 and 0.164 -> 0.438 m, at 4 m/s on none) the ground speed
+  stands in. (Tried: ``k |V - W|^2 / 2g`` as ``k V^2 / 2g - V . kW / g`` and a constant,
+  with two more states per barometer offered beside the head alone: that mission in a 2-5
+  m/s wind 0.06-0.32 m; not kept, as the extra per-event coefficients put the 300 MB log's
+  peak at 1.59x the file, and the 45-minute repeated flight's fused_std grew to 1.4 m.)
 - the terrain's roughness under a rangefinder, per metre flown (:func:`terrain_noise`, with the
   horizontal speed from ``GPS.Spd``): over flat ground, or hovering, the rangefinder is an
   absolute reference; over hills it tells only short-term changes. Where the speed ends (a GPS
@@ -430,7 +432,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     layout, scale_gain, ev, physical = relearnt_scales(
         ev, physical, r, layout, inputs.scale_unknown, inputs.scale_known
     )
-    layout, dynamic_gain = dynamic_evidence(physical, r, layout, dynamic)
+    layout, dynamic_gain, airspeed = dynamic_evidence(physical, r, layout, dynamic)
     layout, thermal_gain, chosen = thermal_evidence(physical, r, layout)
     if chosen is None and layout is plain:
         chosen = tested  # the GPS test's pass of this very model, where it ran
@@ -480,6 +482,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             **evidence_record("stable", stable_gain > STABLE_GAIN, stable_gain, sensor="gps"),
             **evidence_record("scale", layout.has("scale"), scale_gain),
             **evidence_record("dynamic", layout.has("dynamic"), dynamic_gain),
+            **({"baro_dynamic_speed": _SPEEDS[airspeed]} if layout.has("dynamic") else {}),
             **drifts,
             **evidence_record("thermal", layout.has("thermal"), thermal_gain),
             **_fitted(names, ev, noise, layout, xs[-1]),
@@ -580,13 +583,14 @@ def _layout(
     standing: bool,
     accel: Samples | None,
     correlation_s: float,
-) -> tuple[Layout, list[Regressor]]:
+) -> tuple[Layout, list[list[Regressor]]]:
     """The model's states before the tests: the offsets (their priors from the datum where no
     span stands still, ``standing``; a GPS's bounded, of correlation time ``correlation_s``),
     each barometer's temperature coefficient (with a sensor other than a barometer), and the
     vertical velocity's lag where the accelerometer (``accel``) tells it; and the barometers'
-    dynamic-pressure coefficients (with a sensor other than a barometer), offered to a test of
-    their own (:func:`.evidence.dynamic_evidence`)."""
+    dynamic-pressure coefficients (with a sensor other than a barometer) at the airspeed the
+    datum's wind leaves (where it found one) and at the ground speed, offered to a test of
+    their own (:func:`.evidence.dynamic_evidence`; in ``_SPEEDS``' order)."""
     times, who, position = events
     samples = inputs.samples
     # barometers alone: nothing tells a temperature or a dynamic head from the height
@@ -603,7 +607,11 @@ def _layout(
     )
     if alone:
         return layout, []
-    return layout, dynamic_regressors(inputs.speed, samples, inputs.kinds, (who, position))
+    speeds = (inputs.airspeed, inputs.speed)
+    return layout, [
+        [] if v is None else dynamic_regressors(v, samples, inputs.kinds, (who, position))
+        for v in speeds
+    ]
 
 
 def _jumps(
@@ -675,6 +683,11 @@ def _accelerometer(inputs: FusionInput, times: FloatArray) -> tuple[FloatArray, 
     return np.nan_to_num(interval_mean(accel, times)), np.nan_to_num(added)
 
 
+#: The speeds a barometer's dynamic pressure is offered at (:func:`_layout`), as recorded.
+_SPEEDS = (
+    "the airspeed: the ground velocity less the datum's wind",
+    "the ground speed (the air taken as still)",
+)
 #: How each regressor is recorded: the key's pattern and unit.
 _RECORD = {
     "thermal": "thermal_{}_m_per_degC",
