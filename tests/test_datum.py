@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from altfuse.align import Aligned
-from altfuse.datum import Track, dynamic_head, refer_to_takeoff, referred_samples
+from altfuse.datum import Track, Wind, dynamic_head, refer_to_takeoff, referred_samples
 from altfuse.fuse import FusionInput
 from altfuse.fuse.support import SupportParams, fuse_support
 from altfuse.model import Samples, Series
@@ -267,6 +267,20 @@ def test_a_wind_is_found_beside_the_dynamic_pressure() -> None:
     ground = {o.name: o for o in refer_to_takeoff(aligned, track=Track(track.speed)).offsets}
     assert "dynamic pressure" not in str(ground["baro"].scale_method)  # told by neither fit
     assert abs(baro.scale - 1.05) < abs(ground["baro"].scale - 1.05) / 4  # 0.0001 and 0.0043
+
+
+def test_a_track_s_velocity_is_interpolated_as_components() -> None:
+    """A course of 350 then 10 deg is north between them, not south (an angle interpolated
+    through 180); a course of one sample tells no velocity, and the airspeed is the ground
+    speed."""
+    t = np.array([0.0, 2.0])
+    track = Track(Samples(t, np.array([5.0, 5.0])), Samples(t, np.array([350.0, 10.0])))
+    ne = track.components(np.array([1.0]))
+    assert ne is not None
+    np.testing.assert_allclose(ne[:, 0], [5.0 * np.cos(np.radians(10.0)), 0.0], atol=1e-12)
+    lone = Track(track.speed, Samples(t[:1], np.array([90.0])))
+    assert lone.components(t) is None
+    assert lone.airspeed(Wind(1.0, 1.0, 0.1)) is lone.speed
 
 
 def test_no_wind_is_told_where_the_air_is_still() -> None:

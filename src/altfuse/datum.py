@@ -171,8 +171,8 @@ class Track:
     def components(self, t: FloatArray) -> FloatArray | None:
         """The ground velocity's north and east components [m/s] at the times ``t`` (``(2,
         n)``, interpolated as components, not as an angle that wraps); None without a
-        course."""
-        if self.course is None:
+        course (fewer than two samples of it)."""
+        if self.course is None or self.course.t.size < 2:
             return None
         course = np.radians(_at(self.course, self.speed.t, period=360.0))
         speed = np.nan_to_num(self.speed.value)
