@@ -256,9 +256,11 @@ def test_a_wind_is_found_beside_the_dynamic_pressure() -> None:
     assert wind is not None
     assert wind.north_m_s == pytest.approx(3.0, abs=0.2)
     assert wind.east_m_s == 0.0  # the track has no east: nothing told, nothing assumed
-    assert wind.std_m_s < 0.2
-    assert "in a wind of 3.0" in str(baro.scale_method)
-    assert "from 180 deg" in str(baro.scale_method)
+    assert wind.east_std_m_s is None
+    assert wind.north_std_m_s is not None
+    assert wind.north_std_m_s < 0.2
+    assert wind.sigmas == pytest.approx(wind.north_m_s / wind.north_std_m_s)
+    assert "in a wind of 3.0 m/s from 180 deg (north +3.0 +- 0.1)" in str(baro.scale_method)
     assert baro.scale == pytest.approx(1.05, abs=0.003)
     assert track.course is not None
     north = np.where(track.course.value == 180.0, -1.0, 1.0) * track.speed.value
@@ -280,7 +282,7 @@ def test_a_track_s_velocity_is_interpolated_as_components() -> None:
     np.testing.assert_allclose(ne[:, 0], [5.0 * np.cos(np.radians(10.0)), 0.0], atol=1e-12)
     lone = Track(track.speed, Samples(t[:1], np.array([90.0])))
     assert lone.components(t) is None
-    assert lone.airspeed(Wind(1.0, 1.0, 0.1)) is lone.speed
+    assert lone.airspeed(Wind(1.0, 1.0, 0.1, 0.1)) is lone.speed
 
 
 def test_no_wind_is_told_where_the_air_is_still() -> None:

@@ -77,7 +77,7 @@ def _regained(s: Series, _rng: np.random.Generator, _: str) -> Series:
 def _airflow(s: Series, track: Track, k: float, east_m_s: float = 0.0) -> Series:
     """``k V^2 / 2g`` higher, ``V`` the airspeed at its samples: the ground velocity (the
     ``track``'s speed and course) less a wind of ``east_m_s`` blowing to the east."""
-    air = track.airspeed(Wind(0.0, east_m_s, 0.0))
+    air = track.airspeed(Wind(0.0, east_m_s, 0.0, 0.0))
     v = np.interp(s.t, air.t, air.value)
     return replace(s, value=s.value + k * v**2 / (2.0 * G))
 
@@ -111,7 +111,7 @@ def variant(flight: FlightLog, how: str, seed: int = 1) -> FlightLog:
     if what == "gps" and arg:
         speeds = {
             field: _thinned(series, rng, arg)
-            for field in ("vertical_velocity", "ground_speed")
+            for field in ("vertical_velocity", "ground_speed", "ground_course")
             if (series := getattr(flight, field)) is not None
         }
         return replace(_each(flight, "gps", lambda s: _thinned(s, rng, arg)), **speeds)

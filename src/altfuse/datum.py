@@ -201,16 +201,35 @@ def _at(samples: Samples, t: FloatArray, period: float | None = None) -> FloatAr
 @dataclass(frozen=True)
 class Wind:
     """A steady wind [m/s] (the air's velocity: blowing towards north and east), as a
-    barometer's dynamic pressure beside the GPS's ground velocity tells it (:func:`_wind`)."""
+    barometer's dynamic pressure beside the GPS's ground velocity tells it (:func:`_wind`),
+    and each component's standard error (None: a component the flight never had, taken as
+    0)."""
 
     north_m_s: float
     east_m_s: float
-    std_m_s: float  # the larger component's standard error
+    north_std_m_s: float | None
+    east_std_m_s: float | None
+
+    @property
+    def sigmas(self) -> float:
+        """How many standard errors from still air (the components' errors taken as
+        independent)."""
+        return math.hypot(
+            *(w / e for w, e in self._components() if e is not None),
+        )
+
+    def _components(self) -> tuple[tuple[float, float | None], ...]:
+        return (self.north_m_s, self.north_std_m_s), (self.east_m_s, self.east_std_m_s)
 
     def __str__(self) -> str:
         speed = math.hypot(self.north_m_s, self.east_m_s)
         origin = math.degrees(math.atan2(-self.east_m_s, -self.north_m_s)) % 360.0
-        return f"a wind of {speed:.1f} +- {self.std_m_s:.1f} m/s from {origin:.0f} deg"
+        parts = [
+            f"{name} {w:+.1f} +- {e:.1f}"
+            for name, (w, e) in zip(("north", "east"), self._components(), strict=True)
+            if e is not None
+        ]
+        return f"a wind of {speed:.1f} m/s from {origin:.0f} deg ({', '.join(parts)})"
 
 
 @dataclass(frozen=True)
@@ -569,9 +588,9 @@ def _refer_segment(
     wind = None
     if referral == "full":
         scales = baro_scales(aligned, h, offsets, steps, track)
-        wind = min(
+        wind = max(
             (sc.wind for sc in scales.values() if sc.wind is not None),
-            key=lambda w: w.std_m_s,
+            key=lambda w: w.sigmas,
             default=None,
         )
         if any(sc.applied for sc in scales.values()):
@@ -797,13 +816,9 @@ def _scale(
     )  # fmt: skip
     told, wind = None, None
     if air is not None:
-        # with the wind where the fits tell it beside the head, else the head alone
         cols, axes = air
-        for columns, along in [(cols, axes), (cols[:, :1], ())] if axes else [air]:
-            told = _told(((columns[both], levels), (np.diff(columns[::k], axis=0)[ok], changes)))
-            wind = None if told is None else _wind(told[0], along)
-            if wind is not None:
-                break
+        rows = (cols[both], np.diff(cols[::k], axis=0)[ok])
+        told, wind = _with_wind(rows, axes, (levels, changes))
     fit, change = told or (_robust_fit(*levels), _robust_fit(*changes))
     if fit is None or change is None:
         return Scale(1.0, None, reference, "not estimated: no vertical range", False)
@@ -848,22 +863,47 @@ def _told(fits: Sequence[tuple[FloatArray, _Fit]]) -> list[_Solved] | None:
     return out
 
 
+def _with_wind(
+    rows: tuple[FloatArray, FloatArray], axes: tuple[int, ...], fits: tuple[_Fit, _Fit]
+) -> tuple[list[_Solved] | None, Wind | None]:
+    """The levels' and the changes' ``fits`` with the dynamic pressure's columns (``rows``:
+    each fit's rows of them, :func:`_air_columns`), and the wind they tell: with the wind's
+    columns where both fits tell the head and the wind there (a
+    wind strong beside the cruise leaves the ground speed's head untold: out and back at 8
+    m/s in a 3 m/s wind, k 0.24 +- 0.03 and -0.15 +- 0.15 for 0.8); else the head alone where
+    both tell it, with the wind where the levels' fit tells it beside that head (the changes
+    over a 305 m climb's 26 spans cannot tell three coefficients); else None."""
+    if axes:
+        told = _told(tuple(zip(rows, fits, strict=True)))
+        wind = None if told is None else _wind(told[0], axes)
+        if told is not None and wind is not None:
+            return told, wind
+    told = _told(tuple(zip((r[:, :1] for r in rows), fits, strict=True)))
+    if told is None or not axes:
+        return told, None
+    windy = _told(((rows[0], fits[0]),))
+    wind = None if windy is None else _wind(windy[0], axes)
+    return ([windy[0], told[1]] if windy is not None and wind is not None else told), wind
+
+
 def _wind(fit: _Solved, axes: tuple[int, ...]) -> Wind | None:
     """The wind a fit with the dynamic pressure's columns last tells (:func:`_told`; the
     head's, then the ground velocity's components ``axes``): ``W = -(k W) / k`` from their
-    coefficients, where it lies DYNAMIC_SIGMAS of its standard error (first order in the
-    coefficients' errors) from 0; None where it does not (0 along a component the flight
-    never has, or without a course: no ``axes``)."""
+    coefficients, each component's error to first order in theirs, where it lies
+    DYNAMIC_SIGMAS from still air (:attr:`Wind.sigmas`: a component the flight seldom flew
+    along is poorly told, and matters as little to its airspeed); None where it does not, or
+    without a course (no ``axes``; 0 along a component the flight never has)."""
     m = len(axes)
     if not m:
         return None
     (k, *kw), (k_std, *kw_std) = fit[0][-m - 1 :], fit[1][-m - 1 :]
-    wind = np.zeros(2)
-    wind[list(axes)] = -np.asarray(kw) / k
-    std = float(np.max(np.hypot(kw_std, wind[list(axes)] * k_std)) / abs(k))
-    if not math.hypot(*wind) > DYNAMIC_SIGMAS * std:
-        return None
-    return Wind(float(wind[0]), float(wind[1]), std)
+    value: list[float] = [0.0, 0.0]
+    std: list[float | None] = [None, None]
+    for axis, c, c_std in zip(axes, kw, kw_std, strict=True):
+        value[axis] = float(-c / k)
+        std[axis] = float(math.hypot(c_std, value[axis] * k_std) / abs(k))
+    wind = Wind(value[0], value[1], std[0], std[1])
+    return wind if wind.sigmas > DYNAMIC_SIGMAS else None
 
 
 def _robust_fit(

@@ -395,7 +395,8 @@ def wind_record(wind: Wind | None) -> dict[str, Any] | None:
     return {
         "north_m_s": round(wind.north_m_s, 3),
         "east_m_s": round(wind.east_m_s, 3),
-        "std_m_s": round(wind.std_m_s, 3),
+        "north_std_m_s": None if wind.north_std_m_s is None else round(wind.north_std_m_s, 3),
+        "east_std_m_s": None if wind.east_std_m_s is None else round(wind.east_std_m_s, 3),
         "meaning": str(wind),
     }
 
