@@ -120,7 +120,7 @@ DYNAMIC_SIGMAS = 3.0
 #: this [m/s] in the scale's fit. ``k |V - W|^2 / 2g = k V^2 / 2g - k W.V / g + k |W|^2 / 2g``
 #: is linear in ``k`` and ``k W``: the fit takes ``V_north / g`` and ``V_east / g`` as columns
 #: beside the head (the constant joins the offset), and ``W`` is told where it lies
-#: DYNAMIC_SIGMAS of its standard error from 0.
+#: DYNAMIC_SIGMAS of its components' errors from still air (:attr:`Wind.sigmas`).
 WIND_PRIOR_M_S = 5.0
 #: A receiver's velocity resolution [m/s] (centimetres per second): a component of the ground
 #: velocity never beyond it is none (a column of zeros would leave the fit nothing to solve).

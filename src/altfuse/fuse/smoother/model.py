@@ -217,8 +217,9 @@ def dynamic_regressors(
     events: tuple[np.ndarray, np.ndarray],
 ) -> list[Regressor]:
     """A dynamic-pressure coefficient for each barometer (prior DYNAMIC_PRIOR): ``coef`` its
-    dynamic head ``V^2 / 2g`` [m] at its samples (:func:`altfuse.datum.dynamic_head`, from the
-    ground ``speed``). ``events``: their series and positions."""
+    dynamic head ``V^2 / 2g`` [m] at its samples (:func:`altfuse.datum.dynamic_head`, ``V``
+    the ``speed``: the airspeed the datum's wind leaves, or the ground speed). ``events``:
+    their series and positions."""
     who, position = events
     out = []
     for i, kind in enumerate(kinds):
