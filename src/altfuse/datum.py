@@ -886,6 +886,27 @@ def _with_wind(
     return ([windy[0], told[1]] if windy is not None and wind is not None else told), wind
 
 
+def wind_beside(t: FloatArray, residual: FloatArray, track: Track) -> Wind | None:
+    """The wind a barometer's ``residual`` at its samples' times ``t`` against a height not its
+    own tells: ``residual = b + drift t + k |V - W|^2 / 2g``, fitted as the scale's levels are
+    (:func:`baro_scales`), where it tells the head and the wind (:func:`_wind`); None where
+    it does not, or without a head or a course."""
+    air = _air_columns(track, t)
+    ok = np.isfinite(residual)
+    if air is None or not air[1] or ok.sum() < 2 * SCALE_MIN_CHANGES:
+        return None
+    minutes = (t - t[ok][0]) / 60.0
+    blocks = float(np.ptp(t[ok])) / SCALE_BLOCK_S
+    levels = (
+        np.column_stack([np.ones(t.size), minutes])[ok],
+        residual[ok],
+        [math.inf, DRIFT_PRIOR_M_PER_MIN],
+        ok.sum() / max(blocks, 2.0),
+    )
+    told = _told(((air[0][ok], levels),))
+    return None if told is None else _wind(told[0], air[1])
+
+
 def _wind(fit: _Solved, axes: tuple[int, ...]) -> Wind | None:
     """The wind a fit with the dynamic pressure's columns last tells (:func:`_told`; the
     head's, then the ground velocity's components ``axes``): ``W = -(k W) / k`` from their

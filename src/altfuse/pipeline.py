@@ -287,6 +287,7 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         on_ground_s=_on_ground(referred),
         splices=tuple((s.start_s, s.grounded) for s in referred.segments[1:]),
         speed=_samples(flight.ground_speed),
+        course=_samples(flight.ground_course),
         airspeed=_airspeed(flight, referred.wind),
         temperatures=tuple(_samples(temps.get(n)) for n in referred.names),
         accel=accel,

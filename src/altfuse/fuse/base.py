@@ -57,9 +57,11 @@ class FusionInput:
         the main segment's: every offset 0 there) or carry the main segment's offsets.
     speed
         Horizontal speed over ground [m/s] samples; None if the log has none.
+    course
+        The course over the ground [deg from north] of the same GPS, None if the log has none.
     airspeed
-        The speed through the air [m/s] at the same samples: the ground velocity less the wind
-        the datum found (:class:`altfuse.datum.Wind`); None where it found none.
+        The speed through the air [m/s] at ``speed``'s samples: the ground velocity less the
+        wind the datum found (:class:`altfuse.datum.Wind`); None where it found none.
     temperatures
         Each sensor's temperature [degC] samples or None, in ``z``'s order.
     accel
@@ -101,6 +103,7 @@ class FusionInput:
     on_ground_s: tuple[tuple[float, float], ...] = ()
     splices: tuple[tuple[float, bool], ...] = ()
     speed: Samples | None = None
+    course: Samples | None = None
     airspeed: Samples | None = None
     temperatures: tuple[Samples | None, ...] = ()
     accel: VerticalAcceleration | None = None

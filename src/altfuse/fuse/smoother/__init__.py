@@ -124,10 +124,12 @@ From the log itself:
   ``|V - W|`` is offered beside the one at the ground speed, and the likelier taken
   (``baro_dynamic_speed``): the truth logs' copters in a 3 m/s wind (``windy-3``), the hexa
   0.662 -> 0.005 m; handed a wind the air did not blow, the ground speed is taken. Where the
-  datum cannot tell the wind (a GPS 0.35 m noisy and wandering: altfuse's mission, k 0.8,
-  with a steady wind along its track, 3 seeds: at 2 m/s taken on one, 0.581 -> 0.232 m, at
-  3 m/s on two, 0.493 -> 0.459 and 0.164 -> 0.438 m, at 4 m/s on none) the ground speed
-  stands in. (Tried: ``k |V - W|^2 / 2g`` as ``k V^2 / 2g - V . kW / g`` and a constant,
+  datum cannot tell the wind against a noisy GPS, one more pass without the barometers gives
+  a height they are regressed against (:func:`.evidence.smoothed_wind`, ``baro_dynamic_wind``):
+  altfuse's mission in a 2 m/s wind along its track (``baro-airflow``, k 0.40), the wind
+  told 1.4-2.0 m/s, 0.28-0.43 -> 0.06-0.13 m on seeds 0-2; the hexa in a 3 m/s wind with a
+  real receiver's noisy GPS 0.545 -> 0.422 m, k 1.87 -> 0.95. (Tried:
+  ``k |V - W|^2 / 2g`` as ``k V^2 / 2g - V . kW / g`` and a constant,
   with two more states per barometer offered beside the head alone: that mission in a 2-5
   m/s wind 0.06-0.32 m; not kept, as the extra per-event coefficients put the 300 MB log's
   peak at 1.59x the file, and the 45-minute repeated flight's fused_std grew to 1.4 m.)
@@ -208,10 +210,12 @@ check reads 0.1-1.3 where the +-2 sigma coverage runs from 0.63 to 1.00; the vel
 
 Measured (``benchmarks/smoother_accuracy.py``, 198 simulated flights): the lowest RMSE of all
 methods on every one (the closest: the climb with seed 1 and its barometer 7 % high, 0.84 of
-support's); 94.9 % of the true errors within +-2 ``fused_std`` over all, 0.31
-to 1.00 per flight (the lowest on that climb), 77 of the flights within 0.90-0.99; with the
-barometer in the airflow (``baro-airflow``) 0.05-0.10 m, 0.47-0.72 m without its dynamic
-pressure. On the
+support's); 94.7 % of the true errors within +-2 ``fused_std`` over all, 0.31
+to 1.00 per flight (the lowest on that climb), 76 of the flights within 0.90-0.99; with the
+barometer in the airflow in a 2 m/s wind along the track (``baro-airflow``) 0.06-0.13 m (the
+mission's wind told against the height smoothed without the barometer, 1.4-2.0 m/s; the
+climb flies one way, where no wind can be told apart from the head), 0.41-0.49 for the
+best other method. On the
 simulators' 13 truth logs (``benchmarks/truth_accuracy.py``, README "Accuracy"): RMSE and
 maximum error within the project's bar on all 13; the coverage 0.911-1.000, within 0.90-0.99
 on 8 (0.995-1.000 on five, among them those whose sensors lag the truth least:
@@ -247,6 +251,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from altfuse.datum import Track, Wind
 from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult, Jump
 from altfuse.fuse.smoother.events import (
     TICK,
@@ -263,6 +268,7 @@ from altfuse.fuse.smoother.evidence import (
     gps_evidence,
     jump_evidence,
     relearnt_scales,
+    smoothed_wind,
     thermal_evidence,
 )
 from altfuse.fuse.smoother.model import (
@@ -432,7 +438,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     layout, scale_gain, ev, physical = relearnt_scales(
         ev, physical, r, layout, inputs.scale_unknown, inputs.scale_known
     )
-    layout, dynamic_gain, airspeed = dynamic_evidence(physical, r, layout, dynamic)
+    layout, dynamic_gain, airspeed, wind = _dynamic(inputs, (physical, r, layout), dynamic)
     layout, thermal_gain, chosen = thermal_evidence(physical, r, layout)
     if chosen is None and layout is plain:
         chosen = tested  # the GPS test's pass of this very model, where it ran
@@ -483,6 +489,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             **evidence_record("scale", layout.has("scale"), scale_gain),
             **evidence_record("dynamic", layout.has("dynamic"), dynamic_gain),
             **({"baro_dynamic_speed": _SPEEDS[airspeed]} if layout.has("dynamic") else {}),
+            **({} if wind is None else {"baro_dynamic_wind": f"{wind}, {_SMOOTHED_WIND}"}),
             **drifts,
             **evidence_record("thermal", layout.has("thermal"), thermal_gain),
             **_fitted(names, ev, noise, layout, xs[-1]),
@@ -605,13 +612,33 @@ def _layout(
         bounded=tuple(i for i, k in enumerate(inputs.kinds) if k == "gps"),
         correlation_s=correlation_s,
     )
-    if alone:
-        return layout, []
     speeds = (inputs.airspeed, inputs.speed)
     return layout, [
-        [] if v is None else dynamic_regressors(v, samples, inputs.kinds, (who, position))
+        [] if v is None or alone else dynamic_regressors(v, inputs.kinds, (times, who))
         for v in speeds
     ]
+
+
+def _dynamic(
+    inputs: FusionInput,
+    model: tuple[Events, FloatArray, Layout],
+    dynamic: list[list[Regressor]],
+) -> tuple[Layout, float, int, Wind | None]:
+    """:func:`.evidence.dynamic_evidence` on the barometers' dynamic pressure (``dynamic``:
+    :func:`_layout`'s; ``model``: the events, their variances and the layout), and first,
+    where the datum told no wind and the log has the GPS's course and the head is offered at
+    the ground speed, the wind the barometers' readings tell against the height smoothed
+    without them (:func:`.evidence.smoothed_wind`; None: none), its airspeed offered too."""
+    ev, r, layout = model
+    speed, course = inputs.speed, inputs.course
+    wind = None
+    if inputs.airspeed is None and speed is not None and course is not None and dynamic[1]:
+        track = Track(speed, course)
+        wind = smoothed_wind(ev, r, layout, inputs.kinds, track)
+        release_free_memory()  # that pass's, before the test's three
+        if wind is not None:
+            dynamic[0] = dynamic_regressors(track.airspeed(wind), inputs.kinds, (ev.t, ev.who))
+    return (*dynamic_evidence(ev, r, layout, dynamic), wind)
 
 
 def _jumps(
@@ -685,9 +712,11 @@ def _accelerometer(inputs: FusionInput, times: FloatArray) -> tuple[FloatArray, 
 
 #: The speeds a barometer's dynamic pressure is offered at (:func:`_layout`), as recorded.
 _SPEEDS = (
-    "the airspeed: the ground velocity less the datum's wind",
+    "the airspeed: the ground velocity less a steady wind (the datum's, or baro_dynamic_wind)",
     "the ground speed (the air taken as still)",
 )
+_SMOOTHED_WIND = "told by the barometers against the height smoothed without them"
+
 #: How each regressor is recorded: the key's pattern and unit.
 _RECORD = {
     "thermal": "thermal_{}_m_per_degC",

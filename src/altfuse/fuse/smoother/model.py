@@ -211,24 +211,20 @@ def thermal_regressors(
 
 
 def dynamic_regressors(
-    speed: Samples | None,
-    samples: Sequence[Samples],
-    kinds: Sequence[str],
-    events: tuple[np.ndarray, np.ndarray],
+    speed: Samples, kinds: Sequence[str], events: tuple[FloatArray, np.ndarray]
 ) -> list[Regressor]:
     """A dynamic-pressure coefficient for each barometer (prior DYNAMIC_PRIOR): ``coef`` its
     dynamic head ``V^2 / 2g`` [m] at its samples (:func:`altfuse.datum.dynamic_head`, ``V``
-    the ``speed``: the airspeed the datum's wind leaves, or the ground speed). ``events``:
-    their series and positions."""
-    who, position = events
+    the ``speed``: an airspeed, or the ground speed). ``events``: their times and series."""
+    times, who = events
     out = []
     for i, kind in enumerate(kinds):
-        head = dynamic_head(speed, samples[i].t) if kind == "baro" else None
+        mine = who == i
+        head = dynamic_head(speed, times[mine]) if kind == "baro" else None
         if head is None:
             continue
         coef = np.zeros(who.size)
-        mine = who == i
-        coef[mine] = head[position[mine]]
+        coef[mine] = head
         out.append(Regressor("dynamic", i, coef, DYNAMIC_PRIOR))
     return out
 
