@@ -631,14 +631,15 @@ def _dynamic(
     without them (:func:`.evidence.smoothed_wind`; None: none), its airspeed offered too."""
     ev, r, layout = model
     speed, course = inputs.speed, inputs.course
+    airspeed, ground = dynamic
     wind = None
-    if inputs.airspeed is None and speed is not None and course is not None and dynamic[1]:
+    if inputs.airspeed is None and speed is not None and course is not None and ground:
         track = Track(speed, course)
         wind = smoothed_wind(ev, r, layout, inputs.kinds, track)
-        release_free_memory()  # that pass's, before the test's three
+        release_free_memory()  # that pass's, before the test's
         if wind is not None:
-            dynamic[0] = dynamic_regressors(track.airspeed(wind), inputs.kinds, (ev.t, ev.who))
-    return (*dynamic_evidence(ev, r, layout, dynamic), wind)
+            airspeed = dynamic_regressors(track.airspeed(wind), inputs.kinds, (ev.t, ev.who))
+    return (*dynamic_evidence(ev, r, layout, [airspeed, ground]), wind)
 
 
 def _jumps(
