@@ -417,7 +417,7 @@ def _stepped(which: int) -> tuple[FusionInput, np.ndarray, np.ndarray]:
     z[t >= 70.0, which] += 1.0
     inputs = FusionInput.from_heights(z, dt, kinds=("gps", "baro"), accel_up=a)
     (step,) = find_steps(t, z, inputs.names, inputs.kinds)
-    jump = (step.time_s, (0, 1), step.size_m)
+    jump = (step.time_s, (0, 1), step.size_m, step.half_width_s)
     return replace(inputs, on_ground_s=((0.0, 18.0),), steps=(jump,)), h, t
 
 
@@ -453,7 +453,9 @@ def test_a_gps_s_step_against_two_barometers_is_one_jump_of_the_gps() -> None:
     inputs = FusionInput.from_heights(z, dt, kinds=("gps", "baro", "baro"), accel_up=a)
     steps = find_steps(t, z, inputs.names, inputs.kinds)
     assert [(s.first, s.second) for s in steps] == [("gps", "baro"), ("gps", "baro2")]
-    jumps = tuple((s.time_s, (0, inputs.names.index(s.second)), s.size_m) for s in steps)
+    jumps = tuple(
+        (s.time_s, (0, inputs.names.index(s.second)), s.size_m, s.half_width_s) for s in steps
+    )
     res = fuse_smoother(replace(inputs, on_ground_s=((0.0, 18.0),), steps=jumps), SmootherParams())
     when, size, sensor = re.fullmatch(r"(\S+) s: (\S+) m, (\w+)", str(res.params["steps"])).groups()
     assert (float(when), sensor) == (69.95, "gps")

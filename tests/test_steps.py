@@ -7,7 +7,15 @@ import numpy as np
 import pytest
 
 from altfuse.model import SensorKind
-from altfuse.steps import STEP_GAP_S, STEP_MIN_M, _end_error, _line_ends, _step_at, find_steps
+from altfuse.steps import (
+    STEP_GAP_S,
+    STEP_MIN_M,
+    _end_error,
+    _line_ends,
+    _step_at,
+    find_steps,
+    jump_instant,
+)
 
 KINDS: tuple[SensorKind, SensorKind] = ("gps", "baro")
 
@@ -120,3 +128,17 @@ def test_a_step_is_two_least_squares_lines_drawn_to_the_gap_s_middle(gap: int) -
     design = [np.column_stack([np.ones(n), x - middle]) for x in (after, before)]
     variance = sum(np.linalg.inv(a.T @ a)[0, 0] for a in design)
     assert _end_error(n, gap) == pytest.approx(np.sqrt(variance), rel=1e-12)
+
+
+def test_a_sensor_s_own_jump_is_found_in_a_span_by_its_own_heights() -> None:
+    """A climb at 2 m/s, 0.05 m noisy, 1 m higher from 66.27 s: within 62-75 s its own heights
+    jump at the boundary before the first stepped tick (the climb's ramp meets itself); a span
+    with no whole lines either side, none."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 120.0, 0.1)
+    h = 2.0 * t + rng.normal(0, 0.05, t.size) + np.where(t >= 66.27, 1.0, 0.0)
+    instant = jump_instant(t, h, (62.0, 75.0))
+    assert instant is not None
+    assert instant == pytest.approx(66.25, abs=0.051)
+    assert jump_instant(t, np.full(t.size, np.nan), (62.0, 75.0)) is None
+    assert jump_instant(t[:1], h[:1], (0.0, 1.0)) is None

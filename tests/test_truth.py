@@ -30,6 +30,7 @@ from altfuse.pipeline import (
     prepare_log,
     provenance,
     run_method,
+    step_record,
 )
 from conftest import SHARED_LOGS, shared_log
 from repeated import cut_log
@@ -383,6 +384,35 @@ def test_a_wind_the_air_did_not_blow_loses_to_the_ground_speed(wind: Wind) -> No
     ]
     assert runs[1].params["baro_dynamic_speed"].startswith("the ground speed")
     np.testing.assert_array_equal(runs[1].fused, runs[0].fused)
+
+
+def test_two_barometers_stepped_in_the_gps_s_gap_are_the_ones_that_jumped() -> None:
+    """The 137 m flight's two barometers 1 m higher from 66.27 s (``step-baro``), while its GPS
+    is lost from 62 to 75 s: the steps are found across the gap, at its middle (69.05 s), and
+    lie anywhere in it. The barometers' jump is tried where their own heights step (66.25 s),
+    the GPS's in its gap: the log takes the barometers', their samples after it moved back.
+    Their jump tried at the gap's middle could not explain their step at 66.27 s, the GPS's
+    could, and the height followed them: 0.663 m RMSE against the GPS's 0.005 (now 0.004)."""
+    evaluation = evaluate_prepared(
+        changed("copter_4.4.4_wlichon_home137m_rfndzero.BIN", "step-baro"),
+        ["smoother"],
+        truth="sim",
+    )
+    steps = evaluation.prepared.referred.steps
+    assert [(s.first, s.second) for s in steps] == [("gps", "baro"), ("gps", "baro2")]
+    assert all(s.time_s == pytest.approx(69.05, abs=0.1) for s in steps)
+    assert all(s.half_width_s == pytest.approx(6.65, abs=0.1) for s in steps)
+    recorded = [step_record(s) for s in steps]
+    assert [r["half_width_s"] for r in recorded] == [round(s.half_width_s, 3) for s in steps]
+    jumps = str(evaluation.runs["smoother"].result.params["steps"]).split("; ")
+    assert [re.sub(r"\S+ m", "x m", j) for j in jumps] == [
+        "66.25 s: x m, baro",
+        "66.25 s: x m, baro2",
+    ]
+    result = verdict(evaluation, "smoother")
+    fails = result["fails"]
+    assert isinstance(fails, list)
+    assert not {"rmse", "max"} & set(fails), result
 
 
 def changed(name: str, *hows: str) -> Prepared:

@@ -299,7 +299,12 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         scale_known=tuple(o.scale_known for o in referred.offsets),
         landed=_samples(flight.landed),
         steps=tuple(
-            (s.time_s, (referred.names.index(s.first), referred.names.index(s.second)), s.size_m)
+            (
+                s.time_s,
+                (referred.names.index(s.first), referred.names.index(s.second)),
+                s.size_m,
+                s.half_width_s,
+            )
             for s in referred.steps
             if s.first in referred.names and s.second in referred.names
         ),
@@ -409,6 +414,8 @@ def step_record(step: Step) -> dict[str, Any]:
         "between": [step.first, step.second],
         "size_m": round(step.size_m, 3),
         "sigmas": round(step.sigmas, 1),
+        # found across a gap of one sensor's: anywhere within this of time_s [s] (else 0)
+        "half_width_s": round(step.half_width_s, 3),
     }
 
 

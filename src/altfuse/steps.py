@@ -26,10 +26,12 @@ one far beyond them counts. A step is kept where it is ``STEP_SIGMAS`` of that a
 Measured: none on the 13 truth logs; none on the real logs shared but in one crash's last
 seconds (rima48: 1.5 and 4.0 m); on altfuse's sample flights a GPS glitch (13.6 and 14.0 m in
 and out: the size is read on the clock, where the spline smears a 5 Hz GPS's 15 m jump) and Paper
-A's scattering GPS (2.9 m). A 1 m step injected half-way: found on 10 and 11 of the 13 truth
-logs (barometer, GPS): the 3.3 plane's barometer is 0.62 m noisy, the 4.5 plane's step is 0.76
-m beside barometers 0.11 m noisy, neither 10 sigma; the 137 m flight's GPS, constant while its
-two stepped barometers moved, was dropped as stuck. Across a gap of one sensor of up to
+A's scattering GPS (2.9 m). A 1 m step injected half-way: found on 11 of the 13 truth logs
+(barometer, and GPS): the 3.3 plane's barometer is 0.62 m noisy, the 4.5 plane's step is 0.76
+m beside barometers 0.11 m noisy, neither 10 sigma; the 137 m flight's two barometers step
+2.8 s into a 13 s loss of its GPS, found across it (``Step.half_width_s``: anywhere in the
+gap; :func:`jump_instant`, where a sensor's own heights say when). Across a gap of one sensor
+of up to
 ``STEP_GAP_S`` (a GPS lost and regained elsewhere) the lines are drawn to its middle: with one
 sensor lost for 10 s from half-way and 2 m higher after (``regain-gps``, ``regain-baro``), the
 smoother within the bar on 12 and 11 of the 13 truth logs, where it was 11 and 6. Not across a
@@ -64,15 +66,22 @@ STEP_GAP_S = 20.0
 STEP_MOST = 20
 
 
+#: A step as :func:`_steps` finds it: time [s], size [m], significance [sigma], half its gap [s].
+_Found = tuple[float, float, float, float]
+
+
 @dataclass(frozen=True)
 class Step:
-    """``second``'s heights less ``first``'s jump by ``size_m`` at ``time_s``."""
+    """``second``'s heights less ``first``'s jump by ``size_m`` at ``time_s``, at most
+    ``half_width_s`` from it (half a gap of one sensor's, across which it was found: the jump
+    lies anywhere in the gap)."""
 
     time_s: float
     first: str
     second: str
     size_m: float
     sigmas: float
+    half_width_s: float = 0.0
 
 
 def find_steps(
@@ -82,9 +91,9 @@ def find_steps(
     per sensor), by time."""
     steady = [i for i, kind in enumerate(kinds) if kind != "rangefinder"]
     found = [
-        Step(time, names[i], names[j], size, sigmas)
+        Step(time, names[i], names[j], size, sigmas, half)
         for i, j in itertools.combinations(steady, 2)
-        for time, size, sigmas in _steps(t, h[:, j] - h[:, i], _either(h[:, i], h[:, j]))
+        for time, size, sigmas, half in _steps(t, h[:, j] - h[:, i], _either(h[:, i], h[:, j]))
     ]
     return tuple(sorted(found, key=lambda s: s.time_s))
 
@@ -94,19 +103,17 @@ def _either(a: FloatArray, b: FloatArray) -> npt.NDArray[np.bool_]:
     return np.asarray(np.isfinite(a) | np.isfinite(b), dtype=bool)
 
 
-def _steps(
-    t: FloatArray, d: FloatArray, either: npt.NDArray[np.bool_]
-) -> list[tuple[float, float, float]]:
-    """The steps of ``d`` on the clock ``t``: (time [s], size [m], significance [sigma]); gaps
-    are bridged where ``either`` sensor kept measuring. The most significant is taken out of
-    ``d`` and the rest sought again: the lines over the longer spans see a step from seconds
-    away, and a glitch out and back is two steps."""
+def _steps(t: FloatArray, d: FloatArray, either: npt.NDArray[np.bool_]) -> list[_Found]:
+    """The steps of ``d`` on the clock ``t``: (time [s], size [m], significance [sigma], half
+    the gap it lies in [s]); gaps are bridged where ``either`` sensor kept measuring. The most
+    significant is taken out of ``d`` and the rest sought again: the lines over the longer
+    spans see a step from seconds away, and a glitch out and back is two steps."""
     if t.size < 2 or np.isfinite(d).sum() < 10:
         return []
     dt = float(t[1] - t[0])
     d = d.copy()
     valid = np.flatnonzero(np.isfinite(d))
-    found: list[tuple[float, float, float]] = []
+    found: list[_Found] = []
     for _ in range(STEP_MOST):
         best, size = _significance(d, dt, either)
         candidate = (best > STEP_SIGMAS) & (np.abs(size) >= STEP_MIN_M)
@@ -118,22 +125,46 @@ def _steps(
         # the boundary: half-way from the last valid tick before k (a gap's middle)
         before = valid[np.searchsorted(valid, k) - 1] if valid[0] < k else k - 1
         if abs(jump) >= STEP_MIN_M:
-            found.append((0.5 * float(t[before] + t[k]), float(jump), float(best[k])))
+            span = float(t[k] - t[before])
+            found.append((float(t[before]) + 0.5 * span, float(jump), float(best[k]), 0.5 * span))
         d[k:] -= jump
     return _merged(sorted(found))
 
 
-def _merged(found: list[tuple[float, float, float]]) -> list[tuple[float, float, float]]:
+def jump_instant(t: FloatArray, h: FloatArray, span: tuple[float, float]) -> float | None:
+    """Where within ``span`` [s] one sensor's own heights ``h`` (on the clock ``t``) jump the
+    most: the boundary at which the lines over STEP_WINDOWS_S[0] either side differ the most
+    (a climb's ramp meets itself); None where the span holds no whole pair of lines. A step
+    found across another sensor's gap lies anywhere in the gap (:func:`find_steps`); where this
+    sensor jumped, its own heights tell when."""
+    if t.size < 2:
+        return None
+    dt = float(t[1] - t[0])
+    n = max(5, round(STEP_WINDOWS_S[0] / dt))
+    lo, hi = np.searchsorted(t, span[0]), np.searchsorted(t, span[1], side="right")
+    first = max(int(lo) - n, 0)
+    part = h[first : int(hi) + n]
+    step = _line_ends(part, n, right=True) - _line_ends(part, n, right=False)
+    inside = np.zeros(part.size, dtype=bool)
+    inside[lo - first : hi - first] = True
+    inside &= np.isfinite(step)
+    if not inside.any():
+        return None
+    k = first + int(np.flatnonzero(inside)[np.argmax(np.abs(step[inside]))])
+    return 0.5 * float(t[k - 1] + t[k]) if k else float(t[0])
+
+
+def _merged(found: list[_Found]) -> list[_Found]:
     """``found`` (by time) with the steps closer than STEP_WINDOWS_S[0] to the one before
-    taken as one, at the first's time, of their sum: a spike out and back (a GPS's 1.2 m for
-    0.3 s in a simulator's log with 2 % of its samples spiked) is no step, and one in two
-    parts is one."""
-    out: list[tuple[float, float, float]] = []
-    for time, size, sigmas in found:
+    taken as one, at the first's time and in its gap, of their sum: a spike out and back (a
+    GPS's 1.2 m for 0.3 s in a simulator's log with 2 % of its samples spiked) is no step, and
+    one in two parts is one."""
+    out: list[_Found] = []
+    for time, size, sigmas, half in found:
         if out and time - out[-1][0] < STEP_WINDOWS_S[0]:
-            first, total, most = out.pop()
-            time, size, sigmas = first, total + size, max(most, sigmas)
-        out.append((time, size, sigmas))
+            first, total, most, first_half = out.pop()
+            time, size, sigmas, half = first, total + size, max(most, sigmas), first_half
+        out.append((time, size, sigmas, half))
     return [step for step in out if abs(step[1]) >= STEP_MIN_M]
 
 

@@ -28,8 +28,9 @@ DIVERGED: Final[Status] = "diverged"  # the value left every valid sensor (altfu
 LogInput = Literal["accel"]
 
 
-#: A step between sensors: its time [s], the sensors that may have jumped, the jump [m].
-Jump = tuple[float, tuple[int, ...], float]
+#: A step between sensors: its time [s], the sensors that may have jumped, the jump [m], and
+#: how far from that time it may lie [s] (half a gap of one sensor's across which it was found).
+Jump = tuple[float, tuple[int, ...], float, float]
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ log-likelihood (a likelihood-ratio test)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -300,7 +300,10 @@ def relearnt_scales(
 
 
 def jump_evidence(
-    ev: Events, r: FloatArray, layout: Layout, steps: Sequence[Jump]
+    ev: Events,
+    model: tuple[FloatArray, Layout],
+    steps: Sequence[Jump],
+    windowed: Callable[[Jump], Jump],
 ) -> tuple[Jump, ...]:
     """The ``steps`` between two sensors (by time), each given to the one sensor that jumped
     where the log's evidence tells (``ev``'s offsets' densities without the jumps).
@@ -316,13 +319,18 @@ def jump_evidence(
     other events as they stand, and goes to the one whose samples' log-likelihood is JUMP_GAIN
     higher (:func:`evidence_gain`: over the samples both accept, and no more of them
     rejected), each sensor with its own jump; else, several steps to the sensor they share
-    (the others agree it moved), one step to both its sensors.
+    (the others agree it moved), one step to both its sensors. ``model``: the samples'
+    variances and the layout; ``windowed``: a jump as :func:`altfuse.steps.find_steps` gives
+    it (half the gap it was found across last) with the window it lies in instead
+    (:func:`.noise.with_jumps`).
     """
+    r, layout = model
     events = _together(steps)
-    chosen = [[steps[k] for k in event] for event in events]
+    chosen = [[windowed(steps[k]) for k in event] for event in events]
     order = sorted(range(len(events)), key=lambda e: -max(abs(steps[k][2]) for k in events[e]))
     for e in order[:JUMP_TESTS]:
-        options = _options(chosen[e])
+        raw = _options([steps[k] for k in events[e]])
+        options = [[windowed(jump) for jump in option] for option in raw]
         if not options:
             continue
         trials = []
@@ -346,14 +354,14 @@ def _options(event: Sequence[Jump]) -> list[list[Jump]]:
     sensor's jump or its second's; several (sharing one sensor) as one jump of the sensor they
     share (their mean, once: a GPS's jump against two barometers is one jump) or each other
     sensor's; none where a step was already given."""
-    pairs = [sensors for _, sensors, _ in event]
+    pairs = [step[1] for step in event]
     if any(len(p) != 2 for p in pairs):
         return []
     if len(event) == 1:
         return [[_own(event[0], pairs[0][0])], [_own(event[0], pairs[0][1])]]
     (one,) = set.intersection(*(set(p) for p in pairs))  # one shared (:func:`_together`)
     jumps = [_own(step, one)[2] for step in event]
-    common: Jump = (event[0][0], (one,), float(np.mean(jumps)))
+    common: Jump = (event[0][0], (one,), float(np.mean(jumps)), max(s[3] for s in event))
     return [[common], [_own(step, next(s for s in step[1] if s != one)) for step in event]]
 
 
@@ -378,5 +386,5 @@ def _together(steps: Sequence[Jump]) -> list[list[int]]:
 def _own(step: Jump, sensor: int) -> Jump:
     """``step`` (between two sensors, the second's jump against the first's) as ``sensor``'s
     own jump."""
-    time, sensors, size = step
-    return (time, (sensor,), size if sensor == sensors[1] else -size)
+    time, sensors, size, half = step
+    return (time, (sensor,), size if sensor == sensors[1] else -size, half)

@@ -368,15 +368,16 @@ def with_jumps(q_state: FloatArray, steps: Sequence[Jump], times: FloatArray) ->
     """The sensor states' random-walk densities ``q_state`` (one row, or one per event at
     ``times``) with, at each of the ``steps`` between sensors, a jump of each sensor that may
     have jumped of JUMP_SIGMAS times the step (one standard deviation), spread over the events
-    within JUMP_HALF_WIDTH_S of it."""
+    within the step's window of it (its last entry, a half-width [s]: JUMP_HALF_WIDTH_S, or a
+    clock tick where the sensor's own heights tell the instant)."""
     if not steps:
         same: FloatArray = q_state.copy()
         return same
     out: FloatArray = np.array(np.broadcast_to(q_state, (times.size, q_state.shape[1])))
-    for time, sensors, size in steps:
-        near = np.abs(times - time) <= JUMP_HALF_WIDTH_S
+    for time, sensors, size, width in steps:
+        near = np.abs(times - time) <= width
         for i in sensors:
-            out[near, i] += (JUMP_SIGMAS * size) ** 2 / (2.0 * JUMP_HALF_WIDTH_S)
+            out[near, i] += (JUMP_SIGMAS * size) ** 2 / (2.0 * width)
     return out
 
 
