@@ -347,7 +347,7 @@ def test_a_barometer_in_the_airflow_of_a_windy_flight_is_corrected(
     from 268-269 deg), the smoother takes the airspeed it leaves, k 0.95-0.96: 0.005 and
     0.006 m, each within the bar on RMSE and maximum. The hexa's GPS at 1 Hz too: its flight
     east and west tells the wind's east +3.5 +- 1.1 m/s, its north +0.7 +- 2.0, together 3.4
-    sigma from still air where the north alone would have kept it untold (0.520 m; 0.006)."""
+    sigma from still air where the north alone would have kept it untold (0.520 m; 0.005)."""
     prepared = changed(name, *hows)
     wind = prepared.referred.wind
     assert wind is not None

@@ -768,6 +768,14 @@ def baro_scales(
     }
 
 
+def _in_time(t: FloatArray, valid: npt.NDArray[np.bool_]) -> tuple[FloatArray, float]:
+    """A level fit's time column [min from the first ``valid`` tick, a drift's regressor], and
+    its rows per independent one: the GPS's wander correlates the residuals, one independent
+    sample per SCALE_BLOCK_S."""
+    blocks = float(np.ptp(t[valid])) / SCALE_BLOCK_S
+    return (t - t[valid][0]) / 60.0, float(valid.sum()) / max(blocks, 2.0)
+
+
 def _between(steps: Sequence[Step], a: str, b: str) -> list[float]:
     """The times [s] of the ``steps`` between sensors ``a`` and ``b``."""
     return [s.time_s for s in steps if {s.first, s.second} == {a, b}]
@@ -789,15 +797,13 @@ def _scale(
     if both.sum() < 2 * SCALE_MIN_CHANGES:
         return Scale(1.0, None, reference, f"not estimated: too few ticks beside {reference}",
                      False)  # fmt: skip
-    minutes = (t - t[both][0]) / 60.0
+    minutes, per_independent = _in_time(t, both)
     jumps = [(t > at).astype(np.float64) for at in steps]
-    # the GPS's wander correlates the residuals: one independent sample per SCALE_BLOCK_S
-    blocks = float(np.ptp(t[both])) / SCALE_BLOCK_S
     levels = (
         np.column_stack([x, minutes, np.ones(t.size), *jumps])[both],
         y[both],
         [math.inf, DRIFT_PRIOR_M_PER_MIN, math.inf] + [math.inf] * len(jumps),
-        both.sum() / max(blocks, 2.0),
+        per_independent,
     )
     lo, hi = SCALE_SPAN_S
     # too few ticks for SCALE_CHANGES spans that long: shorter ones, as many
@@ -895,13 +901,12 @@ def wind_beside(t: FloatArray, residual: FloatArray, track: Track) -> Wind | Non
     ok = np.isfinite(residual)
     if air is None or not air[1] or ok.sum() < 2 * SCALE_MIN_CHANGES:
         return None
-    minutes = (t - t[ok][0]) / 60.0
-    blocks = float(np.ptp(t[ok])) / SCALE_BLOCK_S
+    minutes, per_independent = _in_time(t, ok)
     levels = (
         np.column_stack([np.ones(t.size), minutes])[ok],
         residual[ok],
         [math.inf, DRIFT_PRIOR_M_PER_MIN],
-        ok.sum() / max(blocks, 2.0),
+        per_independent,
     )
     told = _told(((air[0][ok], levels),))
     return None if told is None else _wind(told[0], air[1])

@@ -226,12 +226,6 @@ def _samples(series: Series | None) -> Samples | None:
     return None if series is None else Samples(series.t, series.value)
 
 
-def _airspeed(flight: FlightLog, wind: Wind | None) -> Samples | None:
-    """The GPS's ground velocity less the ``wind`` the datum found; None without one."""
-    track = _track(flight)
-    return None if wind is None or track is None else track.airspeed(wind)
-
-
 def _track(flight: FlightLog) -> Track | None:
     """The GPS's ground speed and course, where the log has the speed."""
     speed = _samples(flight.ground_speed)
@@ -288,7 +282,7 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         splices=tuple((s.start_s, s.grounded) for s in referred.segments[1:]),
         speed=_samples(flight.ground_speed),
         course=_samples(flight.ground_course),
-        airspeed=_airspeed(flight, referred.wind),
+        wind=referred.wind,
         temperatures=tuple(_samples(temps.get(n)) for n in referred.names),
         accel=accel,
         gps_velocity_up=velocity,

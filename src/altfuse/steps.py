@@ -139,12 +139,11 @@ def jump_instant(t: FloatArray, h: FloatArray, span: tuple[float, float]) -> flo
     sensor jumped, its own heights tell when."""
     if t.size < 2:
         return None
-    dt = float(t[1] - t[0])
-    n = max(5, round(STEP_WINDOWS_S[0] / dt))
+    n = _ticks(STEP_WINDOWS_S[0], float(t[1] - t[0]))
     lo, hi = np.searchsorted(t, span[0]), np.searchsorted(t, span[1], side="right")
     first = max(int(lo) - n, 0)
     part = h[first : int(hi) + n]
-    step = _line_ends(part, n, right=True) - _line_ends(part, n, right=False)
+    step = _line_steps(part, n)
     inside = np.zeros(part.size, dtype=bool)
     inside[lo - first : hi - first] = True
     inside &= np.isfinite(step)
@@ -180,10 +179,10 @@ def _significance(
     best, size = np.zeros(d.size), np.zeros(d.size)
     gaps = _gaps(d, dt, either)
     for window_s in STEP_WINDOWS_S:
-        n = max(5, round(window_s / dt))
+        n = _ticks(window_s, dt)
         if 2 * n > d.size:
             continue
-        step = _line_ends(d, n, right=True) - _line_ends(d, n, right=False)
+        step = _line_steps(d, n)
         known = np.isfinite(step)
         if not known.any():
             continue
@@ -221,7 +220,7 @@ def _sizes(d: FloatArray, dt: float, k: int) -> list[float]:
     gap = 0
     while gap < k and not np.isfinite(d[k - 1 - gap]):
         gap += 1
-    sizes = [_step_at(d, k, max(5, round(w / dt)), gap) for w in STEP_WINDOWS_S]
+    sizes = [_step_at(d, k, _ticks(w, dt), gap) for w in STEP_WINDOWS_S]
     return sizes[::-1] if gap else sizes
 
 
@@ -240,6 +239,17 @@ def _end_error(n: int, gap: int) -> float:
     middle of the ``gap`` between them, per unit of the ticks' white noise:
     ``sqrt(2 (1/n + ((n + gap) / 2)^2 / S_xx))``."""
     return math.sqrt(2.0 * (1.0 / n + ((n + gap) / 2.0) ** 2 / (n * (n * n - 1.0) / 12.0)))
+
+
+def _ticks(window_s: float, dt: float) -> int:
+    """The ticks a line spans over ``window_s`` [s] of a clock ``dt`` apart (at least 5)."""
+    return max(5, round(window_s / dt))
+
+
+def _line_steps(d: FloatArray, n: int) -> FloatArray:
+    """At each boundary, the line over the ``n`` ticks after it less the line over the ``n``
+    before, both at the boundary (:func:`_line_ends`)."""
+    return _line_ends(d, n, right=True) - _line_ends(d, n, right=False)
 
 
 def _line_ends(d: FloatArray, n: int, *, right: bool) -> FloatArray:

@@ -11,6 +11,7 @@ from typing import Final, Generic, Literal, TypeVar
 import numpy as np
 import numpy.typing as npt
 
+from altfuse.datum import Wind
 from altfuse.inertial import VerticalAcceleration
 from altfuse.model import FloatArray, Samples, SensorKind, Vibration
 from altfuse.params import Params
@@ -29,7 +30,8 @@ LogInput = Literal["accel"]
 
 
 #: A step between sensors: its time [s], the sensors that may have jumped, the jump [m], and
-#: how far from that time it may lie [s] (half a gap of one sensor's across which it was found).
+#: how far from that time the jump may lie [s] (found across a gap of one sensor's: half the
+#: gap; the smoother narrows it, :func:`altfuse.fuse.smoother.noise.with_jumps`).
 Jump = tuple[float, tuple[int, ...], float, float]
 
 
@@ -60,9 +62,9 @@ class FusionInput:
         Horizontal speed over ground [m/s] samples; None if the log has none.
     course
         The course over the ground [deg from north] of the same GPS, None if the log has none.
-    airspeed
-        The speed through the air [m/s] at ``speed``'s samples: the ground velocity less the
-        wind the datum found (:class:`altfuse.datum.Wind`); None where it found none.
+    wind
+        The steady wind the datum's scale fit found beside the barometers' dynamic pressure
+        (:class:`altfuse.datum.Wind`); None where it found none.
     temperatures
         Each sensor's temperature [degC] samples or None, in ``z``'s order.
     accel
@@ -105,7 +107,7 @@ class FusionInput:
     splices: tuple[tuple[float, bool], ...] = ()
     speed: Samples | None = None
     course: Samples | None = None
-    airspeed: Samples | None = None
+    wind: Wind | None = None
     temperatures: tuple[Samples | None, ...] = ()
     accel: VerticalAcceleration | None = None
     gps_velocity_up: Samples | None = None

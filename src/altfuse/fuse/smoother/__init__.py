@@ -414,7 +414,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     noise = measurement_noise(inputs, params.sigma_m, (who, position), velocity)
     still = still_events(times, who, inputs.on_ground_s)
     a, q_added = _accelerometer(inputs, times)
-    layout, dynamic = _layout(
+    layout, ground = _layout(
         inputs,
         (times, who, position),
         bool(still.any()),
@@ -441,13 +441,13 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     layout, scale_gain, ev, physical = relearnt_scales(
         ev, physical, r, layout, inputs.scale_unknown, inputs.scale_known
     )
-    layout, dynamic_gain, airspeed, wind = _dynamic(inputs, (physical, r, layout), dynamic)
+    layout, dynamic_gain, airspeed, wind = _dynamic(inputs, (physical, r, layout), ground)
     layout, thermal_gain, chosen = thermal_evidence(physical, r, layout)
     if chosen is None and layout is plain:
         chosen = tested  # the GPS test's pass of this very model, where it ran
     # the forward pass of the layout chosen, where one was made with these noises
     layout, drifts = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
-    del tested, chosen, r, dynamic
+    del tested, chosen, r, ground
     release_free_memory()  # the tests' passes, before the smoothing ones
     floor = ev.q_accel
     ev, out = _smoothed(ev, layout, noise, floor if params.accel_noise_m2_s3 is None else None)
@@ -593,14 +593,13 @@ def _layout(
     standing: bool,
     accel: Samples | None,
     correlation_s: float,
-) -> tuple[Layout, list[list[Regressor]]]:
+) -> tuple[Layout, list[Regressor]]:
     """The model's states before the tests: the offsets (their priors from the datum where no
     span stands still, ``standing``; a GPS's bounded, of correlation time ``correlation_s``),
     each barometer's temperature coefficient (with a sensor other than a barometer), and the
     vertical velocity's lag where the accelerometer (``accel``) tells it; and the barometers'
-    dynamic-pressure coefficients (with a sensor other than a barometer) at the airspeed the
-    datum's wind leaves (where it found one) and at the ground speed, offered to a test of
-    their own (:func:`.evidence.dynamic_evidence`; in ``_SPEEDS``' order)."""
+    dynamic-pressure coefficients at the ground speed (with a sensor other than a barometer),
+    offered to a test of their own (:func:`_dynamic`)."""
     times, who, position = events
     samples = inputs.samples
     # barometers alone: nothing tells a temperature or a dynamic head from the height
@@ -615,34 +614,35 @@ def _layout(
         bounded=tuple(i for i, k in enumerate(inputs.kinds) if k == "gps"),
         correlation_s=correlation_s,
     )
-    speeds = (inputs.airspeed, inputs.speed)
-    return layout, [
-        [] if v is None or alone else dynamic_regressors(v, inputs.kinds, (times, who))
-        for v in speeds
-    ]
+    if alone or inputs.speed is None:
+        return layout, []
+    return layout, dynamic_regressors(inputs.speed, inputs.kinds, (times, who))
 
 
 def _dynamic(
-    inputs: FusionInput,
-    model: tuple[Events, FloatArray, Layout],
-    dynamic: list[list[Regressor]],
+    inputs: FusionInput, model: tuple[Events, FloatArray, Layout], ground: list[Regressor]
 ) -> tuple[Layout, float, int, Wind | None]:
-    """:func:`.evidence.dynamic_evidence` on the barometers' dynamic pressure (``dynamic``:
-    :func:`_layout`'s; ``model``: the events, their variances and the layout), and first,
-    where the datum told no wind and the log has the GPS's course and the head is offered at
-    the ground speed, the wind the barometers' readings tell against the height smoothed
-    without them (:func:`.evidence.smoothed_wind`; None: none), its airspeed offered too."""
+    """:func:`.evidence.dynamic_evidence` on the barometers' dynamic pressure at the ground
+    speed (``ground``: :func:`_layout`'s) and, where the log has the GPS's course and a steady
+    wind is known, at the airspeed it leaves (in ``_SPEEDS``' order); ``model``: the events,
+    their variances and the layout. The wind is the datum's (``inputs.wind``) or, where it
+    found none, the one the barometers' readings tell against the height smoothed without
+    them (:func:`.evidence.smoothed_wind`), returned (None: none, or the datum's)."""
     ev, r, layout = model
     speed, course = inputs.speed, inputs.course
-    airspeed, ground = dynamic
-    wind = None
-    if inputs.airspeed is None and speed is not None and course is not None and ground:
-        track = Track(speed, course)
-        wind = smoothed_wind(ev, r, layout, inputs.kinds, track)
+    if speed is None or course is None or not ground:
+        return (*dynamic_evidence(ev, r, layout, [[], ground]), None)
+    track = Track(speed, course)
+    wind, told = inputs.wind, None
+    if wind is None:
+        wind = told = smoothed_wind(ev, r, layout, inputs.kinds, track)
         release_free_memory()  # that pass's, before the test's
-        if wind is not None:
-            airspeed = dynamic_regressors(track.airspeed(wind), inputs.kinds, (ev.t, ev.who))
-    return (*dynamic_evidence(ev, r, layout, [airspeed, ground]), wind)
+    airspeed = (
+        []
+        if wind is None
+        else dynamic_regressors(track.airspeed(wind), inputs.kinds, (ev.t, ev.who))
+    )
+    return (*dynamic_evidence(ev, r, layout, [airspeed, ground]), told)
 
 
 def _jumps(
