@@ -263,6 +263,7 @@ from altfuse.fuse.smoother.events import (
 )
 from altfuse.fuse.smoother.evidence import (
     STABLE_GAIN,
+    Made,
     drift_evidence,
     dynamic_evidence,
     evidence_record,
@@ -431,23 +432,21 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     del position, q_added  # in the noises, the layout and the events now
     r = noise.r(who)  # before EM: the local noises as they are
     steps, ev = _jumps(inputs, ev, r, layout)
-    ev, stable_gain, tested = _gps_stability(
-        inputs, (ev, steps), r, layout, params.offset_noise_m2_s
-    )
+    ev, stable_gain, made = _gps_stability(inputs, (ev, steps), r, layout, params.offset_noise_m2_s)
     physical = ev
     if params.offset_noise_m2_s:
         physical = replace(ev, q_state=with_jumps(state_noise(inputs, times, {})[0], steps, times))
-    plain = layout
     layout, scale_gain, ev, physical = relearnt_scales(
         ev, physical, r, layout, inputs.scale_unknown, inputs.scale_known
     )
-    layout, dynamic_gain, airspeed, wind = _dynamic(inputs, (physical, r, layout), ground)
-    layout, thermal_gain, chosen = thermal_evidence(physical, r, layout)
-    if chosen is None and layout is plain:
-        chosen = tested  # the GPS test's pass of this very model, where it ran
-    # the forward pass of the layout chosen, where one was made with these noises
-    layout, drifts = drift_evidence(ev, r, layout, kinds, chosen if physical is ev else None)
-    del tested, chosen, r, ground
+    # each test hands on the forward pass of the model it chose (``made``), which the next
+    # reads where it is its own model's (the same events and layout) rather than filter again
+    layout, dynamic_gain, airspeed, wind, made = _dynamic(
+        inputs, (physical, r, layout), ground, made
+    )
+    layout, thermal_gain, made = thermal_evidence(physical, r, layout, made)
+    layout, drifts = drift_evidence(ev, r, layout, kinds, made)
+    del made, r, ground
     release_free_memory()  # the tests' passes, before the smoothing ones
     floor = ev.q_accel
     ev, out = _smoothed(ev, layout, noise, floor if params.accel_noise_m2_s3 is None else None)
@@ -620,18 +619,23 @@ def _layout(
 
 
 def _dynamic(
-    inputs: FusionInput, model: tuple[Events, FloatArray, Layout], ground: list[Regressor]
-) -> tuple[Layout, float, int, Wind | None]:
+    inputs: FusionInput,
+    model: tuple[Events, FloatArray, Layout],
+    ground: list[Regressor],
+    made: Made | None,
+) -> tuple[Layout, float, int, Wind | None, Made | None]:
     """:func:`.evidence.dynamic_evidence` on the barometers' dynamic pressure at the ground
     speed (``ground``: :func:`_layout`'s) and, where the log has the GPS's course and a steady
     wind is known, at the airspeed it leaves (in ``_SPEEDS``' order); ``model``: the events,
-    their variances and the layout. The wind is the datum's (``inputs.wind``) or, where it
-    found none, the one the barometers' readings tell against the height smoothed without
-    them (:func:`.evidence.smoothed_wind`), returned (None: none, or the datum's)."""
+    their variances and the layout, ``made`` a pass made already. The wind is the datum's
+    (``inputs.wind``) or, where it found none, the one the barometers' readings tell against
+    the height smoothed without them (:func:`.evidence.smoothed_wind`), returned (None: none,
+    or the datum's), before the pass of the layout chosen."""
     ev, r, layout = model
     speed, course = inputs.speed, inputs.course
     if speed is None or course is None or not ground:
-        return (*dynamic_evidence(ev, r, layout, [[], ground]), None)
+        found, gain, taken, made = dynamic_evidence(ev, r, layout, [[], ground], made)
+        return found, gain, taken, None, made
     track = Track(speed, course)
     wind, told = inputs.wind, None
     if wind is None:
@@ -642,7 +646,8 @@ def _dynamic(
         if wind is None
         else dynamic_regressors(track.airspeed(wind), inputs.kinds, (ev.t, ev.who))
     )
-    return (*dynamic_evidence(ev, r, layout, [airspeed, ground]), told)
+    found, gain, taken, made = dynamic_evidence(ev, r, layout, [airspeed, ground], made)
+    return found, gain, taken, told, made
 
 
 def _jumps(
@@ -689,7 +694,7 @@ def _gps_stability(
     r: FloatArray,
     layout: Layout,
     given: Mapping[str, float],
-) -> tuple[Events, float, dict[str, np.ndarray] | None]:
+) -> tuple[Events, float, Made | None]:
     """``ev`` with the GPS offsets as stable as a barometer's (their jumps at ``steps`` kept)
     where the log's evidence asks for it (:func:`.evidence.gps_evidence`), that evidence and
     the forward pass of the events chosen; no test (NaN, None) without a GPS, or where the user

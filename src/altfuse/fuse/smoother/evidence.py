@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -93,9 +93,30 @@ def evidence_gain(without: dict[str, np.ndarray], richer: dict[str, np.ndarray])
     return float(np.sum(richer["loglik"][both]) - np.sum(without["loglik"][both]))
 
 
+@dataclass(frozen=True)
+class Made:
+    """A forward pass made already (:func:`.passes.likelihood`'s ``verdicts``) and the model
+    it was made of: its ``events`` and ``layout``, each compared by identity (a test hands on
+    the very objects it keeps). The tests in turn pass on the pass of the model each chose: the
+    next compares its richer model with that one, which it need not filter again (on the 300
+    MB log two of nine passes were the same model's; ``r``, the variances, are the same in
+    every test)."""
+
+    events: Events
+    layout: Layout
+    verdicts: dict[str, np.ndarray]
+
+
+def _made_of(made: Made | None, events: Events, layout: Layout) -> dict[str, np.ndarray] | None:
+    """The verdicts of ``made`` where it is the pass of ``events`` and ``layout``; else None."""
+    if made is None or made.events is not events or made.layout is not layout:
+        return None
+    return made.verdicts
+
+
 def gps_evidence(
     ev: Events, r: FloatArray, layout: Layout, stable: FloatArray
-) -> tuple[Events, float, dict[str, np.ndarray]]:
+) -> tuple[Events, float, Made]:
     """``ev`` with its GPS offsets' random walks as stable as a barometer's (``stable``, the
     offsets' densities per event) where the log's evidence asks for it, that evidence, and the
     forward pass of the events chosen.
@@ -111,7 +132,8 @@ def gps_evidence(
     trial = replace(ev, q_state=stable)
     default, richer = likelihoods((ev, r, layout), (trial, r, layout))
     gain = evidence_gain(default, richer)
-    return (trial, gain, richer) if gain > STABLE_GAIN else (ev, gain, default)
+    chosen, verdicts = (trial, richer) if gain > STABLE_GAIN else (ev, default)
+    return chosen, gain, Made(chosen, layout, verdicts)
 
 
 def scale_evidence(
@@ -141,29 +163,39 @@ def scale_evidence(
 
 
 def dynamic_evidence(
-    physical: Events, r: FloatArray, layout: Layout, candidates: Sequence[Sequence[Regressor]]
-) -> tuple[Layout, float, int]:
+    physical: Events,
+    r: FloatArray,
+    layout: Layout,
+    candidates: Sequence[Sequence[Regressor]],
+    made: Made | None,
+) -> tuple[Layout, float, int, Made | None]:
     """``layout`` with the barometers' dynamic-pressure coefficients where the log's evidence
-    asks for them, that evidence (NaN without them), and which of the ``candidates`` it took
+    asks for them, that evidence (NaN without them), which of the ``candidates`` it took
     (their regressors, :func:`.model.dynamic_regressors`, at the airspeed the datum's wind
-    leaves and at the ground speed; -1: none): the likeliest taken where it gains DYNAMIC_GAIN
-    over the model without (a wind the datum told wrong loses to the ground speed). Made with
-    the offsets' physical random walks
-    (``physical``), as :func:`thermal_evidence`, and before it and the drift, which would
-    otherwise take the barometer's rise in each fast stretch for a warming or a drift."""
+    leaves and at the ground speed; -1: none), and the pass of the layout chosen (``made``
+    where none was offered): the likeliest taken where it gains DYNAMIC_GAIN over the model
+    without (a wind the datum told wrong loses to the ground speed; its pass ``made`` where
+    that is one already). Made with the offsets' physical random walks (``physical``), as
+    :func:`thermal_evidence`, and before it and the drift, which would otherwise take the
+    barometer's rise in each fast stretch for a warming or a drift."""
     offered = [k for k, c in enumerate(candidates) if c]
     if not offered:
-        return layout, math.nan, -1
+        return layout, math.nan, -1, made
     richer = [layout.adding(candidates[k]) for k in offered]
-    # two passes at once, the third after: three at once put the 300 MB log's peak from 1.42x
+    models = [(physical, r, model) for model in richer]
+    without = _made_of(made, physical, layout)
+    if without is None:
+        models.insert(0, (physical, r, layout))
+    # two passes at once, a third after: three at once put the 300 MB log's peak from 1.42x
     # the file to 1.55x
-    without, first = likelihoods((physical, r, layout), (physical, r, richer[0]))
-    verdicts = [first, *(likelihood(physical, r, model) for model in richer[1:])]
+    verdicts = [*likelihoods(*models[:2]), *(likelihood(*model) for model in models[2:])]
+    if without is None:
+        without = verdicts.pop(0)
     gains = [evidence_gain(without, verdict) for verdict in verdicts]
     best = int(np.argmax(gains))
     if not gains[best] > DYNAMIC_GAIN:
-        return layout, gains[best], -1
-    return richer[best], gains[best], offered[best]
+        return layout, gains[best], -1, Made(physical, layout, without)
+    return richer[best], gains[best], offered[best], Made(physical, richer[best], verdicts[best])
 
 
 def smoothed_wind(
@@ -189,11 +221,12 @@ def smoothed_wind(
 
 
 def thermal_evidence(
-    physical: Events, r: FloatArray, layout: Layout
-) -> tuple[Layout, float, dict[str, np.ndarray] | None]:
+    physical: Events, r: FloatArray, layout: Layout, made: Made | None
+) -> tuple[Layout, float, Made | None]:
     """``layout`` with the barometers' temperature coefficients where the log's evidence asks
     for them, that evidence (the log-likelihood gain, NaN without a temperature), and the
-    forward pass of the layout chosen (None without a temperature).
+    forward pass of the layout chosen (``made`` without a temperature; ``made`` is also
+    ``layout``'s where it is that pass).
 
     In a simulator's standard atmosphere the temperature follows the height, and a coefficient
     on it is a second, wrong scale (three climbs: 0.09-0.29 m RMSE with it, 0.01-0.04 m
@@ -203,11 +236,17 @@ def thermal_evidence(
     ``--offset-noise baro=0.001``: 0.40 m RMSE without it, 0.06 m with).
     """
     if not layout.has("thermal"):
-        return layout, math.nan, None
+        return layout, math.nan, made
     plain = layout.without("thermal")
-    without, richer = likelihoods((physical, r, plain), (physical, r, layout))
+    richer = _made_of(made, physical, layout)
+    if richer is None:
+        without, richer = likelihoods((physical, r, plain), (physical, r, layout))
+    else:
+        without = likelihood(physical, r, plain)
     gain = evidence_gain(without, richer)
-    return (layout, gain, richer) if gain > THERMAL_GAIN else (plain, gain, without)
+    if gain > THERMAL_GAIN:
+        return layout, gain, Made(physical, layout, richer)
+    return plain, gain, Made(physical, plain, without)
 
 
 def drift_evidence(
@@ -215,11 +254,11 @@ def drift_evidence(
     r: FloatArray,
     layout: Layout,
     kinds: Sequence[str],
-    stable: dict[str, np.ndarray] | None,
+    made: Made | None,
 ) -> tuple[Layout, dict[str, float | str]]:
     """``layout`` with a drift rate on each barometer's offset where the log's evidence asks
-    for it, and the test's record for the metadata (nothing without a barometer); ``stable``
-    is ``layout``'s forward pass if one was already run with these events.
+    for it, and the test's record for the metadata (nothing without a barometer); ``made``
+    may be ``layout``'s forward pass with these events, made already.
 
     A barometer and a GPS that part slowly tell no more than that one of them drifts. Where the
     log has a GPS, the drift is offered to its receivers instead, too, and the barometers'
@@ -234,6 +273,7 @@ def drift_evidence(
     receivers = tuple(i for i, kind in enumerate(kinds) if kind == "gps")
     if receivers:
         models.append((ev, r, replace(layout, drifting=receivers)))
+    stable = _made_of(made, ev, layout)
     if stable is None:
         stable, *passes = likelihoods((ev, r, layout), *models)
     else:
