@@ -33,6 +33,7 @@ from altfuse.fuse.smoother.model import (
     STILL_SIGMA,
     Events,
     datum_priors,
+    scales_to_relearn,
 )
 from altfuse.fuse.smoother.noise import (
     ACCEL_EM_GAIN,
@@ -263,6 +264,15 @@ def test_a_barometer_scale_the_datum_cannot_tell_is_learnt_where_the_log_asks(
     else:
         assert params["baro_scale"].startswith("not modelled")  # a gain of -2.2
         assert "scale_error_baro" not in params
+
+
+def test_every_barometer_s_scale_is_learnt_again_where_one_is() -> None:
+    """Where one barometer's applied scale is loose, every applied one is learnt again (they
+    share the air); where none is, none; a barometer whose scale was not applied is left out."""
+    loose, tight = (1.052, LEARN_SCALE_STD + 0.001), (1.048, LEARN_SCALE_STD - 0.002)
+    assert scales_to_relearn([None, loose, tight]) == {1: loose, 2: tight}
+    assert scales_to_relearn([None, tight, tight]) == {}
+    assert scales_to_relearn([None, None, loose]) == {2: loose}
 
 
 def test_a_scale_the_datum_applied_loosely_is_relearnt_by_the_smoother(tmp_path: Path) -> None:

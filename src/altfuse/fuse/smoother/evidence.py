@@ -319,12 +319,13 @@ def relearnt_scales(
 ) -> tuple[Layout, float, Events, Events]:
     """:func:`scale_evidence` on the scales the datum did not apply (``unknown``), and first,
     where it applied one with a standard error above LEARN_SCALE_STD (``known``: per sensor the
-    scale applied and its error), also on that barometer's readings referred by their offset
-    only (``z - c = scale h``): where the log's evidence learns every such scale, the smoother
-    takes them and those readings (``ev`` and ``physical`` with them); elsewhere the datum's
-    scales stay. The datum sees the GPS alone, the smoother the accelerometer too: the datum's
-    1.074 +- 0.013 on altfuse's hovers whose barometer reads 7 % high left 0.48-0.71 m RMSE and
-    +-2 sigma coverage 0.12-0.17 (see LEARN_SCALE_STD)."""
+    scale applied and its error), also on the readings of every barometer whose scale it
+    applied, referred by their offset only (``z - c = scale h``;
+    :func:`.model.scales_to_relearn`): where the log's evidence learns every such scale, the
+    smoother takes them and those readings (``ev`` and ``physical`` with them); elsewhere the
+    datum's scales stay. The datum sees the GPS alone, the smoother the accelerometer too: the
+    datum's 1.074 +- 0.013 on altfuse's hovers whose barometer reads 7 % high left 0.48-0.71 m
+    RMSE and +-2 sigma coverage 0.12-0.17 (see LEARN_SCALE_STD)."""
     again = scales_to_relearn(known)
     if again:
         z = physical.z.copy()
