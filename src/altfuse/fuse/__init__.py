@@ -42,9 +42,10 @@ METHODS: dict[str, Method[Any]] = {
 
 #: The method run when none is named: chosen by measurement, the worst case per log over the
 #: simulators' 13 truth logs and altfuse's simulated flights (README, "Accuracy"). The smoother
-#: is the lowest RMSE on 83 of 84 simulated flights, within the project's bar on RMSE and
-#: maximum error on 12 of the truth logs (support: 9), the only method with a fused_std, and
-#: 2.2x support's time on a 300 MB log (8.7-9.0 s against 4.0-4.4 s).
+#: is the lowest RMSE on 198 of 198 simulated flights, within the project's bar on RMSE and
+#: maximum error on all 13 truth logs (support: 9), the only method with a fused_std, and
+#: 2.7-3.3x support's time on a 300 MB log, 2.8x the median of four interleaved pairs (13.8-18.9
+#: s against 5.0-7.0 s whole process, on a day this machine ran slow; README, "Performance").
 DEFAULT_METHOD = "smoother"
 
 
