@@ -19,6 +19,7 @@ from click.testing import CliRunner
 
 from accuracy import coverage, verdict
 from altfuse.cli import cli
+from altfuse.datum import Track
 from altfuse.evaluation import evaluate
 from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import NIS_CHECK, SmootherParams, fuse_smoother, model_check
@@ -735,7 +736,7 @@ def _ground_step(kinds: tuple[str, ...]) -> FusionInput:
     z = 10.0 + rng.normal(0.0, 0.003, (t.size, 3))
     z[:, 2] -= ground  # the rangefinder's height, referred to the ground at take-off
     inputs = FusionInput.from_heights(z, 0.1, kinds=kinds)  # type: ignore[arg-type]
-    return dataclasses.replace(inputs, speed=Samples(t, np.zeros(t.size)))
+    return dataclasses.replace(inputs, track=Track(Samples(t, np.zeros(t.size))))
 
 
 def test_a_rangefinder_over_a_ground_step_is_not_rejected_for_more_than_two_seconds() -> None:

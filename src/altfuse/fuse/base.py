@@ -11,7 +11,7 @@ from typing import Final, Generic, Literal, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from altfuse.datum import Wind
+from altfuse.datum import Track, Wind
 from altfuse.inertial import VerticalAcceleration
 from altfuse.model import FloatArray, Samples, SensorKind, Vibration
 from altfuse.params import Params
@@ -58,10 +58,9 @@ class FusionInput:
         Each segment's start [s] after the first, where the log was spliced (nothing says where
         the vehicle went between), and whether its heights were referred to a ground (its own or
         the main segment's: every offset 0 there) or carry the main segment's offsets.
-    speed
-        Horizontal speed over ground [m/s] samples; None if the log has none.
-    course
-        The course over the ground [deg from north] of the same GPS, None if the log has none.
+    track
+        The GPS's horizontal speed over ground [m/s] and, where the log has it, its course
+        (:class:`altfuse.datum.Track`); None if the log has no speed (``speed`` reads it).
     wind
         The steady wind the datum's scale fit found beside the barometers' dynamic pressure
         (:class:`altfuse.datum.Wind`); None where it found none.
@@ -105,8 +104,7 @@ class FusionInput:
     dt_s: float
     on_ground_s: tuple[tuple[float, float], ...] = ()
     splices: tuple[tuple[float, bool], ...] = ()
-    speed: Samples | None = None
-    course: Samples | None = None
+    track: Track | None = None
     wind: Wind | None = None
     temperatures: tuple[Samples | None, ...] = ()
     accel: VerticalAcceleration | None = None
@@ -135,6 +133,11 @@ class FusionInput:
         if self.accel is not None and self.accel.on_clock.shape != self.t.shape:
             shape = self.accel.on_clock.shape
             raise ValueError(f"accel has shape {shape} for a clock of {self.t.size} ticks")
+
+    @property
+    def speed(self) -> Samples | None:
+        """The GPS's horizontal speed over ground [m/s] (``track``'s); None without it."""
+        return None if self.track is None else self.track.speed
 
     @classmethod
     def from_heights(

@@ -252,7 +252,7 @@ from functools import partial
 
 import numpy as np
 
-from altfuse.datum import Track, Wind
+from altfuse.datum import Wind
 from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult, Jump
 from altfuse.fuse.smoother.events import (
     TICK,
@@ -394,9 +394,9 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     From ``inputs``: each sensor's own referred ``samples`` (fused at their own times), its
     ``kinds`` and ``names``; ``z`` on the clock marks the ticks where no sensor is valid and gives
     the noise densities of the sensors' states; the clock ``t`` at which the result is reported;
-    ``accel`` (None: the altitude-only random-walk model), ``speed``, ``temperatures`` (a
-    barometer with them gets a temperature coefficient) and ``on_ground_s`` (there ``h = 0`` and
-    ``v = 0``) when the log has them.
+    ``accel`` (None: the altitude-only random-walk model), ``track`` (the GPS's speed and
+    course), ``wind`` (the datum's), ``temperatures`` (a barometer with them gets a temperature
+    coefficient) and ``on_ground_s`` (there ``h = 0`` and ``v = 0``) when the log has them.
     """
     names, kinds, samples = inputs.names, inputs.kinds, inputs.samples
     _known_names(params.sigma_m, names, "sigma_m")
@@ -632,11 +632,10 @@ def _dynamic(
     the height smoothed without them (:func:`.evidence.smoothed_wind`), returned (None: none,
     or the datum's), before the pass of the layout chosen."""
     ev, r, layout = model
-    speed, course = inputs.speed, inputs.course
-    if speed is None or course is None or not ground:
+    track = inputs.track
+    if track is None or track.course is None or not ground:
         found, gain, taken, made = dynamic_evidence(ev, r, layout, [[], ground], made)
         return found, gain, taken, None, made
-    track = Track(speed, course)
     wind, told = inputs.wind, None
     if wind is None:
         wind = told = smoothed_wind(ev, r, layout, inputs.kinds, track)
