@@ -411,7 +411,8 @@ class Events:
     ``landed``: the events at which it stands still elsewhere on the ground, none of
     ``still`` (v = 0 alone; None: none); ``reset``: the first event of each segment of a
     spliced log, the row of :func:`reset_states` that returns to the prior there (0 elsewhere;
-    None: none).
+    None: none); ``early``: the samples at which the height is let loose where they fail the
+    gate (the first rejection of an episode a pass before let loose later; None: none).
     """
 
     t: FloatArray
@@ -426,6 +427,7 @@ class Events:
     h0: float
     landed: np.ndarray | None = None
     reset: np.ndarray | None = None
+    early: np.ndarray | None = None
 
 
 @compiled

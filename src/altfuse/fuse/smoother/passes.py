@@ -1,6 +1,7 @@
 """The smoother's passes over the events: the forward Kalman filter, with its innovation gate and
-lockout release, and the backward pass (the modified Bryson-Frazier smoother; steps from
-:mod:`.kalman`), each a compiled loop over the events (:mod:`.compiled`).
+lockout release (early where a pass before says so: :attr:`.model.Events.early`), and the
+backward pass (the modified Bryson-Frazier smoother; steps from :mod:`.kalman`), each a
+compiled loop over the events (:mod:`.compiled`).
 
 The backward pass needs each event's filtered state and covariance; the forward pass keeps them
 only at checkpoints, and the backward one filters again each block of events from its
@@ -54,6 +55,14 @@ from altfuse.model import FloatArray
 LOCKOUT_S = 2.0
 #: ... and when two sensors are rejected on the same side: they agree against the estimate.
 AGREED_LOCKOUT_S = 0.5
+#: What a rejected sample let loose (:func:`_release`): nothing, the height (where every
+#: sensor was rejected for LOCKOUT_S, or another agreed; where two sensors the estimate
+#: followed left it together: from their first rejection in the next pass), a rangefinder's
+#: ground.
+LET_NOTHING, LET_LOST, LET_AGREED, LET_GROUND = 0, 1, 2, 3
+#: Whether another sensor agrees (:func:`_agreed`): one does; one the estimate followed, whose
+#: rejections began with this one's.
+AGREED, AGREED_TOGETHER = 1, 2
 #: Events between two of the forward filter's checkpoints (:func:`_backward`): what the backward
 #: pass needs of a block's events, twice (one block is filtered again while the pass goes back
 #: through the other), is 9.2 MB with six states, against 222 MB for a 7.4-hour log's events.
@@ -68,24 +77,32 @@ class Keep:
     variance of h there; ``rows``, each sample's smoothed ``H x`` (``hx``) and its variance
     (``var_row``), NaN at a tick; and of the forward filter's verdicts, which samples it
     accepted (always) and those named in ``verdicts``: each one's gain on h (``gain_h``), its
-    log-likelihood (``loglik``) and its normalised innovation (``nu``)."""
+    log-likelihood (``loglik``), its normalised innovation (``nu``) and, per sample, whether
+    the height was let loose for the episode of rejections it began (``released``: the next
+    pass lets it loose there, :attr:`.model.Events.early`)."""
 
     states: tuple[int, ...] | None = None
     ticks: bool = False
     var_h: bool = True
     rows: bool = True
-    verdicts: frozenset[str] = frozenset(("gain_h", "loglik", "nu"))
+    verdicts: frozenset[str] = frozenset(("gain_h", "loglik", "nu", "released"))
 
-    def judged(self) -> tuple[bool, bool, bool]:
-        """Whether the forward filter keeps each sample's gain, log-likelihood, innovation."""
-        return "gain_h" in self.verdicts, "loglik" in self.verdicts, "nu" in self.verdicts
+    def judged(self) -> tuple[bool, bool, bool, bool]:
+        """Whether the forward filter keeps each sample's gain, log-likelihood, innovation,
+        release."""
+        return (
+            "gain_h" in self.verdicts,
+            "loglik" in self.verdicts,
+            "nu" in self.verdicts,
+            "released" in self.verdicts,
+        )
 
 
 #: Everything (the tests'); what an EM pass needs (h, v and the accelerometer's bias, each
-#: sample's row); and the last pass (the result: the states and h's variance at the ticks, the
-#: gains, the innovations).
+#: sample's row, where the height was let loose); and the last pass (the result: the states and
+#: h's variance at the ticks, the gains, the innovations).
 EVERYTHING = Keep()
-FOR_EM = Keep(states=(0, 1, 2), var_h=False, verdicts=frozenset())
+FOR_EM = Keep(states=(0, 1, 2), var_h=False, verdicts=frozenset(("released",)))
 FOR_RESULT = Keep(ticks=True, rows=False, verdicts=frozenset(("gain_h", "nu")))
 #: A response pass (:func:`altfuse.fuse.smoother.scale_response`): h at the ticks.
 HEIGHT_ONLY = Keep(states=(0,), ticks=True, var_h=False, rows=False, verdicts=frozenset())
@@ -120,7 +137,12 @@ def run(
         out["var_h"] = var_h
     if keep.rows:
         out.update(hx=hx, var_row=var_row)
-    judged = {"gain_h": verdicts[0], "loglik": verdicts[2], "nu": verdicts[3]}
+    judged = {
+        "gain_h": verdicts[0],
+        "loglik": verdicts[2],
+        "nu": verdicts[3],
+        "released": verdicts[4],
+    }
     return out | {name: judged[name] for name in sorted(keep.verdicts)}
 
 
@@ -170,12 +192,13 @@ def _measured(
     return ev.t, who, ev.z, np.asarray(r, dtype=np.float64), rows
 
 
-def _ground(ev: Events) -> tuple[np.ndarray, np.ndarray]:
+def _ground(ev: Events) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The events held on the ground, as the kernels take them: at the datum (h = 0, v = 0),
-    and elsewhere standing (v = 0)."""
+    and elsewhere standing (v = 0); and those at which the height is let loose early."""
     still = ev.still.astype(np.bool_)
     landed = np.zeros_like(still) if ev.landed is None else ev.landed.astype(np.bool_)
-    return still, landed
+    early = np.zeros(0, dtype=np.bool_) if ev.early is None else ev.early.astype(np.bool_)
+    return still, landed, early
 
 
 def _resets(ev: Events, layout: Layout) -> tuple[np.ndarray, np.ndarray, FloatArray]:
@@ -202,14 +225,16 @@ def _dynamics(
 
 
 #: A filter's whole state between two events (:func:`_carry`): ``x``, ``P``, per state its
-#: sensor's last accepted sample [s] and that one's variance, its last rejection [s] and side,
-#: and the clocks (the last event's time, the last accepted sample's, the holds so far).
+#: sensor's last accepted sample [s] and that one's variance, its last rejection [s], its side
+#: and its first rejection since the last accepted sample of any sensor [s], and the clocks
+#: (the last event's time, the last accepted sample's, the holds so far, the first height
+#: rejected since that sample: its event, -1 none).
 Carry = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 #: The same at every checkpoint: each with a leading axis.
 Checkpoints = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
-#: Per sample: the gain on h, whether it passed the gate, its log-likelihood and its
-#: normalised innovation.
-Verdicts = tuple[FloatArray, np.ndarray, FloatArray, FloatArray]
+#: Per sample: the gain on h, whether it passed the gate, its log-likelihood, its normalised
+#: innovation and whether the height was let loose for the rejections it began.
+Verdicts = tuple[FloatArray, np.ndarray, FloatArray, FloatArray, np.ndarray]
 #: What the backward pass needs of a block's events (:func:`_kept`).
 Kept = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 #: Two blocks' worth of records (:func:`_forward`, :func:`_refilter`).
@@ -219,7 +244,7 @@ Buffers = tuple[Kept, Kept]
 Model = tuple[
     tuple[FloatArray, np.ndarray, FloatArray, FloatArray, Rows],
     tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray],
-    tuple[np.ndarray, np.ndarray],
+    tuple[np.ndarray, np.ndarray, np.ndarray],
     float,
     tuple[FloatArray, FloatArray, np.ndarray, np.ndarray, FloatArray],
 ]
@@ -227,22 +252,24 @@ Model = tuple[
 
 @compiled
 def _forward(
-    model: Model, block: int, keep: bool, judged: tuple[bool, bool, bool]
+    model: Model, block: int, keep: bool, judged: tuple[bool, bool, bool, bool]
 ) -> tuple[FloatArray, Checkpoints, Verdicts, tuple[Buffers, int]]:
     """The forward filter over every event (:func:`_filter`): its state after the last, its
     whole state before every ``block``-th event (the backward pass runs it again from there),
     per sample whether it passed the gate and, where ``judged`` says (else empty), its gain on
-    h, its log-likelihood and its normalised innovation ``y / sqrt(S)``; and two buffers for the
-    backward pass to filter a block again into (:func:`_refilter`), of a block's size with
-    ``keep`` (else of one event), the last block's records already in its own (a flight of one
-    block is filtered once), and how many of its events were held on the ground.
+    h, its log-likelihood, its normalised innovation ``y / sqrt(S)`` and whether the height was
+    let loose for the rejections it began; and two buffers for the backward pass to filter a
+    block again into (:func:`_refilter`), of a block's size with ``keep`` (else of one event),
+    the last block's records already in its own (a flight of one block is filtered once), and
+    how many of its events were held on the ground.
 
     ``model``: the events' times, series (:mod:`.events`), values, variances and rows of H;
     their dynamics: the mean acceleration over the interval ending at each event, the white
     acceleration density there, the sensor states' densities, F's structure and its entries
     off the diagonal; the events held at the datum (h = 0 and v = 0) and standing elsewhere
-    on the ground (v = 0); the gate; the prior, and per event the row of the states (row 0:
-    none) that return to it there (a splice) and the height they return to.
+    on the ground (v = 0), and those at which the height is let loose early (empty: none); the
+    gate; the prior, and per event the row of the states (row 0: none) that return to it there
+    (a splice) and the height they return to.
     """
     t, who = model[0][0], model[0][1]
     count, n = t.size, model[4][0].size
@@ -250,11 +277,12 @@ def _forward(
     blocks = -(-count // block)
     checkpoints = (
         np.zeros((blocks, n)), np.zeros((blocks, n, n)), np.zeros((blocks, n)),
-        np.zeros((blocks, n)), np.zeros((blocks, n, 2)), np.zeros((blocks, 3)),
+        np.zeros((blocks, n)), np.zeros((blocks, n, 3)), np.zeros((blocks, 4)),
     )  # fmt: skip
     verdicts = (
         np.zeros(count if judged[0] else 0), np.zeros(count, dtype=np.bool_),
         np.full(count if judged[1] else 0, np.nan), np.full(count if judged[2] else 0, np.nan),
+        np.zeros(count if judged[3] else 0, dtype=np.bool_),
     )  # fmt: skip
     size = min(count, block) if keep else 1  # else only a hold's scratch
     buffers = (_kept(size, n, size), _kept(size, n, size))
@@ -280,8 +308,8 @@ def _carry(
         start[1].copy(),
         _first_samples(t, who, n),
         np.full(n, np.inf),
-        np.full((n, 2), np.nan),
-        np.array([t[0], t[0], 0.0]),
+        np.full((n, 3), np.nan),
+        np.array([t[0], t[0], 0.0, -1.0]),
     )
 
 
@@ -315,14 +343,15 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
     posterior state and covariance, the sample's ``P H'``, ``S`` and innovation (``S`` 0 where
     it was not fused), and per event held on the ground the same of its holds. ``model``:
     :func:`_forward`'s arguments."""
-    (t, who, z, r, rows), (a, q_accel, q_state, structure, links), (still, landed) = model[:3]
+    (t, who, z, r, rows), (a, q_accel, q_state, structure, links), ground = model[:3]
+    still, landed, early = ground
     gate, start = model[3], model[4]
     x, p, sensor_accepted, sensor_r, refused, clock = carry
     (xf, pf, updates, holds), keep = kept
-    gain_h, accepted, loglik, nu = verdicts
+    gain_h, accepted, loglik, nu, released = verdicts
     reset, returning = start[2], start[3]
     n = x.size
-    previous, last_accepted, held = clock[0], clock[1], int(clock[2])
+    previous, last_accepted, held, episode = clock[0], clock[1], int(clock[2]), int(clock[3])
     first_held = held
     fl: Transition = (np.eye(n), links, structure[2])
     q, u = np.zeros((n, n)), np.zeros(n)
@@ -353,9 +382,16 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
             # a height shut: has the estimate, or a ground, gone astray? (a vertical velocity
             # is gated too, and never a reason to let loose: it says nothing of h)
             if i >= 0 and y * y > gate * gate * s:
+                if episode < 0:  # the first height rejected since the last accepted
+                    episode = k
                 seen = (t[k], r[k], hk[3 + i], last_accepted, sensor_accepted, sensor_r)
-                if _release(3 + i, y, (seen, refused), p):
+                let = _release(3 + i, y, (seen, refused), p, early.size > 0 and early[k])
+                if let:
                     y, s = innovation(x, p, z[k], hk, r[k], ph)
+                if let == LET_AGREED and released.size:
+                    released[episode] = True
+                if not refused[3 + i, 0] > last_accepted:  # its first since then
+                    refused[3 + i, 2] = t[k]
                 refused[3 + i, 0], refused[3 + i, 1] = t[k], math.copysign(1.0, y)
             if nu.size:
                 nu[k] = y / math.sqrt(s)
@@ -370,6 +406,7 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
             accepted[k] = True
             if i >= 0:  # a height: the lockout's clocks
                 last_accepted = sensor_accepted[3 + i] = t[k]
+                episode = -1
                 sensor_r[3 + i] = r[k]
             if loglik.size:  # log N(y; 0, S)
                 loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
@@ -379,7 +416,7 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
         if keep:
             xf[slot] = x
             pack(p, pf[slot])
-    clock[0], clock[1], clock[2] = previous, last_accepted, held
+    clock[0], clock[1], clock[2], clock[3] = previous, last_accepted, held, episode
 
 
 @compiled
@@ -401,13 +438,24 @@ def _kept(kept: int, n: int, held: int) -> tuple[FloatArray, FloatArray, FloatAr
 
 
 @compiled
-def _agreed(c: int, y: float, last_accepted: float, refused: FloatArray) -> bool:
+def _agreed(c: int, y: float, seen: tuple[float, float, FloatArray, FloatArray]) -> int:
     """Whether another sensor than state ``c``'s was rejected on the side of the innovation
-    ``y`` since the last accepted sample."""
+    ``y`` since the last accepted sample: AGREED_TOGETHER where one the estimate followed
+    until then was, its rejections beginning within AGREED_LOCKOUT_S of ``c``'s; AGREED where
+    only others were; else 0. ``seen``: the last accepted sample's time, ``c``'s first
+    rejection since then [s], per state its sensor's last accepted sample [s], and its
+    rejections (:data:`Carry`)."""
+    last_accepted, first, accepted, refused = seen
+    agreed = 0
     for j in range(3, refused.shape[0]):
         if j != c and refused[j, 0] > last_accepted and refused[j, 1] * y > 0.0:
-            return True
-    return False
+            if (
+                accepted[j] >= last_accepted - LOCKOUT_S
+                and abs(refused[j, 2] - first) <= AGREED_LOCKOUT_S
+            ):
+                return AGREED_TOGETHER
+            agreed = AGREED
+    return agreed
 
 
 @compiled
@@ -431,12 +479,18 @@ def _release(
     y: float,
     seen: tuple[tuple[float, float, float, float, FloatArray, FloatArray], FloatArray],
     p: FloatArray,
-) -> bool:
+    early: bool,
+) -> int:
     """A sample of the sensor with state ``c`` fails the gate by the innovation ``y``: let
-    loose what has gone astray, in place on the prior's covariance ``p``, and say whether
-    anything was. ``seen``: the sample's time and variance, its row of H at ``c``, the last accepted
-    sample's time, per state its sensor's last accepted sample [s] and that one's variance;
-    and per state its sensor's last rejection [s] and its side (the innovation's sign)."""
+    loose what has gone astray, in place on the prior's covariance ``p``, and say what was
+    (LET_NOTHING, LET_LOST, LET_AGREED, LET_GROUND). ``seen``: the sample's time and variance,
+    its row of H at ``c``, the last accepted sample's time, per state its sensor's last
+    accepted sample [s] and that one's variance; and per state its sensor's rejections
+    (:data:`Carry`). ``early``: the sample began an episode of rejections that a pass before
+    ended by letting the height loose where two sensors left it together: it is let loose
+    here, at the episode's first rejection, where its sensor was followed (the episode's
+    samples then count: a landing the logged IMU missed left the smoothed height 0.6 m under
+    its sensors for the 1.2 s they were rejected, its band 0.09 m)."""
     (now, r, sign, last_accepted, sensor_accepted, sensor_r), refused = seen
     y2 = y * y
     waited = now - last_accepted
@@ -446,10 +500,11 @@ def _release(
     followed = sensor_accepted[c] >= last_accepted - LOCKOUT_S or _silent(
         now, last_accepted, sensor_accepted, refused
     )
-    lost = waited > LOCKOUT_S or (
-        waited > AGREED_LOCKOUT_S and _agreed(c, y, last_accepted, refused)
-    )
-    if followed and lost:
+    agreed = 0
+    if waited > AGREED_LOCKOUT_S:
+        first = refused[c, 2] if refused[c, 0] > last_accepted else now
+        agreed = _agreed(c, y, (last_accepted, first, sensor_accepted, refused))
+    if followed and (early or agreed or waited > LOCKOUT_S):
         # no sample of any sensor passed the gate for LOCKOUT_S, or for AGREED_LOCKOUT_S where
         # two sensors failed it on one side: the estimate, not every sensor, has gone astray
         # (ArduPilot's EKF3 resets its height after 5 s); its height and velocity become as
@@ -458,7 +513,7 @@ def _release(
         # absent from the logged IMU)
         p[0, 0] += y2
         p[1, 1] += y2 / LOCKOUT_S**2
-        return True
+        return LET_AGREED if early or agreed == AGREED_TOGETHER else LET_LOST
     if sign < 0.0 and now - sensor_accepted[c] > LOCKOUT_S:
         # a rangefinder alone has failed the gate for LOCKOUT_S while a sensor at least as
         # precise passed (the estimate holds): the ground under it has stepped (an edge, a
@@ -468,8 +523,8 @@ def _release(
         for j in range(3, sensor_r.size):
             if j != c and now - sensor_accepted[j] <= LOCKOUT_S and sensor_r[j] <= r:
                 p[c, c] += y2
-                return True
-    return False
+                return LET_GROUND
+    return LET_NOTHING
 
 
 def _backward(
@@ -491,7 +546,7 @@ def _backward(
     pass, run in a thread a block ahead of the backward one (two cores: about the time it
     cost before). ``passes[1]``: whether to smooth. ``model``: :func:`_forward`'s arguments,
     ``forward`` its checkpoints and buffers."""
-    (t, who, _, _, rows), dynamics, (still, landed) = model[:3]
+    (t, who, _, _, rows), dynamics, (still, landed, _) = model[:3]
     block, smooth = passes
     # a block is filtered again into one buffer while the pass goes back through the other
     checkpoints, (buffers, last_held) = forward
