@@ -184,11 +184,11 @@ m under both sensors for 1 s -> 0.03 m; the Solo's truth log with its sensors at
 logged IMU missed the touchdown: 0.62 m under the truth at most, its band 0.09 m -> 0.092 m,
 inside the bar). Only there: where the other sensor was rejected since long before (a real
 crash log's GPS, 15 m off its barometer) or began a second apart (a GPS stepped 2 m after a
-real PX4 log's barometer excursion), the height would jump to the episode's first sample. At
-5 sigma,
-Paper A's barometer excursion was accepted long enough to bend the barometer's temperature
-coefficient (0.24 m/degC against 0.12), and every height after the rangefinder was lost with it
-(0.73 m RMSE against 0.17 m at 3.5 sigma).
+real PX4 log's barometer excursion), the height would jump to the episode's first sample.
+
+At 5 sigma, Paper A's barometer excursion was accepted long enough to bend the barometer's
+temperature coefficient (0.24 m/degC against 0.12), and every height after the rangefinder was
+lost with it (0.73 m RMSE against 0.17 m at 3.5 sigma).
 
 Steps: where two sensors' heights jump against each other (:mod:`altfuse.steps`, found on the
 clock before referral), neither a random walk nor the gate takes it: the smoother followed a
