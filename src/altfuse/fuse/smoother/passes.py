@@ -181,7 +181,7 @@ def _model(ev: Events, r: FloatArray, layout: Layout, rows: Rows | None = None) 
     ``rows`` of H, where made already: :func:`.model.measurement_rows`)."""
     start = (*prior(ev, layout), *_resets(ev, layout))
     measured = _measured(ev, r, measurement_rows(layout, ev.who) if rows is None else rows)
-    return measured, _dynamics(ev, layout), _ground(ev), ev.gate, start
+    return measured, _dynamics(ev, layout), _marks(ev), ev.gate, start
 
 
 def _measured(
@@ -192,9 +192,10 @@ def _measured(
     return ev.t, who, ev.z, np.asarray(r, dtype=np.float64), rows
 
 
-def _ground(ev: Events) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The events held on the ground, as the kernels take them: at the datum (h = 0, v = 0),
-    and elsewhere standing (v = 0); and those at which the height is let loose early."""
+def _marks(ev: Events) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The events marked, as the kernels take them: held on the ground at the datum (h = 0,
+    v = 0) and elsewhere standing (v = 0), and those at which the height is let loose early
+    (empty: none)."""
     still = ev.still.astype(np.bool_)
     landed = np.zeros_like(still) if ev.landed is None else ev.landed.astype(np.bool_)
     early = np.zeros(0, dtype=np.bool_) if ev.early is None else ev.early.astype(np.bool_)
@@ -343,8 +344,8 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
     posterior state and covariance, the sample's ``P H'``, ``S`` and innovation (``S`` 0 where
     it was not fused), and per event held on the ground the same of its holds. ``model``:
     :func:`_forward`'s arguments."""
-    (t, who, z, r, rows), (a, q_accel, q_state, structure, links), ground = model[:3]
-    still, landed, early = ground
+    (t, who, z, r, rows), (a, q_accel, q_state, structure, links), marks = model[:3]
+    still, landed, early = marks
     gate, start = model[3], model[4]
     x, p, sensor_accepted, sensor_r, refused, clock = carry
     (xf, pf, updates, holds), keep = kept
@@ -384,15 +385,15 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
             if i >= 0 and y * y > gate * gate * s:
                 if episode < 0:  # the first height rejected since the last accepted
                     episode = k
-                seen = (t[k], r[k], hk[3 + i], last_accepted, sensor_accepted, sensor_r)
-                let = _release(3 + i, y, (seen, refused), p, early.size > 0 and early[k])
-                if let:
-                    y, s = innovation(x, p, z[k], hk, r[k], ph)
-                if let == LET_AGREED and released.size:
-                    released[episode] = True
                 if not refused[3 + i, 0] > last_accepted:  # its first since then
                     refused[3 + i, 2] = t[k]
                 refused[3 + i, 0], refused[3 + i, 1] = t[k], math.copysign(1.0, y)
+                seen = (t[k], r[k], hk[3 + i], last_accepted, sensor_accepted, sensor_r)
+                let = _release(3 + i, y, (seen, refused), p, early.size > 0 and early[k])
+                if let:  # the innovation is the same, its variance grown
+                    y, s = innovation(x, p, z[k], hk, r[k], ph)
+                if let == LET_AGREED and released.size:
+                    released[episode] = True
             if nu.size:
                 nu[k] = y / math.sqrt(s)
         # the innovation gate: |y| <= gate sqrt(S)
@@ -438,14 +439,15 @@ def _kept(kept: int, n: int, held: int) -> tuple[FloatArray, FloatArray, FloatAr
 
 
 @compiled
-def _agreed(c: int, y: float, seen: tuple[float, float, FloatArray, FloatArray]) -> int:
+def _agreed(c: int, y: float, seen: tuple[float, FloatArray, FloatArray]) -> int:
     """Whether another sensor than state ``c``'s was rejected on the side of the innovation
     ``y`` since the last accepted sample: AGREED_TOGETHER where one the estimate followed
     until then was, its rejections beginning within AGREED_LOCKOUT_S of ``c``'s; AGREED where
-    only others were; else 0. ``seen``: the last accepted sample's time, ``c``'s first
-    rejection since then [s], per state its sensor's last accepted sample [s], and its
-    rejections (:data:`Carry`)."""
-    last_accepted, first, accepted, refused = seen
+    only others were; else 0. ``seen``: the last accepted sample's time, per state its
+    sensor's last accepted sample [s], and its rejections (:data:`Carry`, ``c``'s present one
+    among them)."""
+    last_accepted, accepted, refused = seen
+    first = refused[c, 2]
     agreed = 0
     for j in range(3, refused.shape[0]):
         if j != c and refused[j, 0] > last_accepted and refused[j, 1] * y > 0.0:
@@ -486,11 +488,12 @@ def _release(
     (LET_NOTHING, LET_LOST, LET_AGREED, LET_GROUND). ``seen``: the sample's time and variance,
     its row of H at ``c``, the last accepted sample's time, per state its sensor's last
     accepted sample [s] and that one's variance; and per state its sensor's rejections
-    (:data:`Carry`). ``early``: the sample began an episode of rejections that a pass before
-    ended by letting the height loose where two sensors left it together: it is let loose
-    here, at the episode's first rejection, where its sensor was followed (the episode's
-    samples then count: a landing the logged IMU missed left the smoothed height 0.6 m under
-    its sensors for the 1.2 s they were rejected, its band 0.09 m)."""
+    (:data:`Carry`, this one among them). ``early``: the sample began an episode of
+    rejections that a pass before ended by letting the height loose where two sensors left it
+    together: it is let loose here, at the episode's first rejection, where its sensor was
+    followed (the episode's samples then count: a landing the logged IMU missed left the
+    smoothed height 0.6 m under its sensors for the 1.2 s they were rejected, its band 0.09
+    m)."""
     (now, r, sign, last_accepted, sensor_accepted, sensor_r), refused = seen
     y2 = y * y
     waited = now - last_accepted
@@ -502,8 +505,7 @@ def _release(
     )
     agreed = 0
     if waited > AGREED_LOCKOUT_S:
-        first = refused[c, 2] if refused[c, 0] > last_accepted else now
-        agreed = _agreed(c, y, (last_accepted, first, sensor_accepted, refused))
+        agreed = _agreed(c, y, (last_accepted, sensor_accepted, refused))
     if followed and (early or agreed or waited > LOCKOUT_S):
         # no sample of any sensor passed the gate for LOCKOUT_S, or for AGREED_LOCKOUT_S where
         # two sensors failed it on one side: the estimate, not every sensor, has gone astray
