@@ -494,26 +494,64 @@ def test_a_real_log_s_sensor_stepped_2_m_is_its_jump_beside_the_others(stepped: 
     assert np.sqrt(np.nanmean(moved**2)) < (0.5 if stepped == "baro" else 0.02)
 
 
-def test_a_landing_the_accelerometer_did_not_log_is_followed_from_the_first_rejection() -> None:
-    """Issue 15, item 1: a descent at 0.6 m/s stops on the ground and the logged IMU shows no
-    touchdown (a PX4 simulator's landing). GPS and barometer leave the estimate together: the
-    forward filter lets it loose after AGREED_LOCKOUT_S, not the 2 s of LOCKOUT_S (1.4 m
-    under both sensors for 2.5 s on that log), and the EM passes at their first rejection
-    (0.43 m under both for 1 s when the forward filter's decision stood; 0.03 m now)."""
+def _unlogged_landing(
+    gps_m: float, baro_m: float, baro_every: int
+) -> tuple[np.ndarray, np.ndarray, dict[str, object], np.ndarray]:
+    """A descent at 0.6 m/s that stops on the ground at 20 s, the touchdown absent from the
+    logged IMU (a PX4 simulator's landing), a GPS ``gps_m`` noisy at 5 Hz and a barometer
+    ``baro_m`` noisy every ``baro_every`` 50 Hz tick: the smoother's fused height, its
+    metadata, and the truth and the clock."""
     rng = np.random.default_rng(11)
     dt = 0.02
     t = np.arange(0.0, 40.0, dt)
     h = np.where(t < 10.0, 6.0, np.clip(0.6 * (20.0 - t), 0.0, None))  # on the ground at 20 s
     a = rng.normal(0.0, 0.02, t.size)  # level flight, then the descent starts: both logged
     a[int(10.0 / dt)] -= 0.6 / dt  # the descent's start, not its stop
-    z = np.column_stack([h + rng.normal(0, 0.02, t.size), h + rng.normal(0, 0.05, t.size)])
+    z = np.column_stack([h + rng.normal(0, gps_m, t.size), h + rng.normal(0, baro_m, t.size)])
     z[np.arange(t.size) % 10 != 0, 0] = np.nan  # the GPS at 5 Hz
-    z[np.arange(t.size) % 5 != 0, 1] = np.nan  # the barometer at 10 Hz
+    z[np.arange(t.size) % baro_every != 0, 1] = np.nan
     inputs = FusionInput.from_heights(z, dt, kinds=("gps", "baro"), accel_up=a)
     res = fuse_smoother(inputs, SmootherParams())
-    error = np.abs(res.fused - h)
+    return res.fused, dict(res.params), h, t
+
+
+def test_a_landing_the_accelerometer_did_not_log_is_followed_from_the_first_rejection() -> None:
+    """Issue 15, item 1: the landing's GPS and barometer (10 Hz) leave the estimate together:
+    the forward filter lets it loose after AGREED_LOCKOUT_S, not the 2 s of LOCKOUT_S (1.4 m
+    under both sensors for 2.5 s on that PX4 log), and the EM passes at their first rejection
+    (0.43 m under both for 1 s when the forward filter's decision stood; 0.03 m now)."""
+    fused, params, h, t = _unlogged_landing(0.02, 0.05, 5)
+    error = np.abs(fused - h)
     assert np.nanmax(error[t >= 19.0]) < 0.1
-    assert res.params["rejected_gps"] + res.params["rejected_baro"] <= 2
+    assert int(params["rejected_gps"]) + int(params["rejected_baro"]) <= 2
+
+
+def test_a_precise_sensor_rejected_while_a_noisy_one_leans_its_way_lets_the_height_loose() -> None:
+    """Issue 15, item 1: the same landing with a barometer (25 Hz) noisy enough to pass the
+    gate as the estimate sinks under the ground. The GPS alone is rejected, so no two sensors
+    agree by failing the gate together; the barometer's accepted samples lean its way (a PX4
+    simulator's landing: the height 0.18 m under both for 3 s, fused_std 0.024 m), and the
+    height is let loose after AGREED_LOCKOUT_S, from the GPS's first rejection in the EM
+    passes."""
+    fused, params, h, t = _unlogged_landing(0.01, 0.25, 2)
+    error = np.abs(fused - h)
+    assert np.nanmax(error[t >= 20.5]) < 0.05  # 0.027; 0.145 before
+    assert int(params["rejected_gps"]) <= 1
+
+
+def test_a_real_landing_is_back_on_its_sensors_within_a_second() -> None:
+    """The PX4 simulator's landing of the test above (pyulog's sample with events): on the
+    ground from 25.7 s, the estimate sank under a GPS and a barometer that agree at 0 m, the
+    GPS rejected and the barometer passing; the height stayed 0.18 m under both for 3 s
+    (0.14 m at 26.5 s), its band 0.024 m. Now it is back on them within a second."""
+    options = FuseOptions()
+    run = run_method(prepare_log(shared_log("px4/pyulog_sample_px4_events.ulg"), options), options)
+    t, z = run.referred.t, run.referred.h
+    after = (t >= 26.5) & (t <= 28.8)
+    assert run.referred.names == ("gps", "baro")
+    assert np.isfinite(z[after]).all()
+    assert np.abs(z[after, 0] - z[after, 1]).mean() < 0.06  # the two agree
+    assert np.max(np.abs(run.result.fused[after] - z[after, 0])) < 0.04  # 0.022; 0.139 before
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])

@@ -55,14 +55,20 @@ from altfuse.model import FloatArray
 LOCKOUT_S = 2.0
 #: ... and when two sensors are rejected on the same side: they agree against the estimate.
 AGREED_LOCKOUT_S = 0.5
+#: A sensor whose samples pass the gate agrees with one rejected for AGREED_LOCKOUT_S where
+#: its innovations over that span lean to the rejected one's side by this many standard
+#: errors of their mean, and their mean is within as many of the rejected innovation
+#: (:func:`_leaning`): ArduPilot's EKF3 gates its heights at 5 sigma.
+LEAN_SIGMAS = 5.0
 #: What a rejected sample let loose (:func:`_release`): nothing, the height (where every
 #: sensor was rejected for LOCKOUT_S, or another agreed; where two sensors the estimate
-#: followed left it together: from their first rejection in the next pass), a rangefinder's
+#: followed left it together: from their first rejection in the next pass; where one that
+#: passed leant with it: from this sensor's first rejection in the next pass), a rangefinder's
 #: ground.
-LET_NOTHING, LET_LOST, LET_AGREED, LET_GROUND = 0, 1, 2, 3
-#: Whether another sensor agrees (:func:`_agreed`): one does; one the estimate followed, whose
-#: rejections began with this one's.
-AGREED, AGREED_TOGETHER = 1, 2
+LET_NOTHING, LET_LOST, LET_AGREED, LET_GROUND, LET_LEANT = 0, 1, 2, 3, 4
+#: Whether another sensor agrees (:func:`_agreed`, :func:`_leaning`): one does; one the
+#: estimate followed, whose rejections began with this one's; one that passed, leaning with it.
+AGREED, AGREED_TOGETHER, LEANT = 1, 2, 3
 #: Events between two of the forward filter's checkpoints (:func:`_backward`): what the backward
 #: pass needs of a block's events, twice (one block is filtered again while the pass goes back
 #: through the other), is 9.2 MB with six states, against 222 MB for a 7.4-hour log's events.
@@ -226,13 +232,17 @@ def _dynamics(
 
 
 #: A filter's whole state between two events (:func:`_carry`): ``x``, ``P``, per state its
-#: sensor's last accepted sample [s] and that one's variance, its last rejection [s], its side
-#: and its first rejection since the last accepted sample of any sensor [s], and the clocks
-#: (the last event's time, the last accepted sample's, the holds so far, the first height
-#: rejected since that sample: its event, -1 none).
-Carry = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+#: sensor's last accepted sample [s] and that one's variance, its last rejection [s], its side,
+#: its first rejection since the last accepted sample of any sensor [s] and the event of its
+#: first since its own; per state the sums of its accepted samples' ``y / S`` and ``1 / S``
+#: (:func:`_leaning`), then each state's sums at its sensor's first rejection since its own
+#: last accepted sample; and the clocks (the last event's time, the last accepted sample's, the
+#: holds so far, the first height rejected since that sample: its event, -1 none).
+Carry = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 #: The same at every checkpoint: each with a leading axis.
-Checkpoints = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+Checkpoints = tuple[
+    FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray
+]
 #: Per sample: the gain on h, whether it passed the gate, its log-likelihood, its normalised
 #: innovation and whether the height was let loose for the rejections it began.
 Verdicts = tuple[FloatArray, np.ndarray, FloatArray, FloatArray, np.ndarray]
@@ -278,7 +288,8 @@ def _forward(
     blocks = -(-count // block)
     checkpoints = (
         np.zeros((blocks, n)), np.zeros((blocks, n, n)), np.zeros((blocks, n)),
-        np.zeros((blocks, n)), np.zeros((blocks, n, 3)), np.zeros((blocks, 4)),
+        np.zeros((blocks, n)), np.zeros((blocks, n, 4)), np.zeros((blocks, n, 2 + 2 * n)),
+        np.zeros((blocks, 4)),
     )  # fmt: skip
     verdicts = (
         np.zeros(count if judged[0] else 0), np.zeros(count, dtype=np.bool_),
@@ -303,13 +314,14 @@ def _carry(
     n: int,
 ) -> Carry:
     """The filter's state (:data:`Carry`) before the first event: the prior; per state its
-    sensor's first sample as its last accepted one, no variance, no rejection."""
+    sensor's first sample as its last accepted one, no variance, no rejection, no sums."""
     return (
         start[0].copy(),
         start[1].copy(),
         _first_samples(t, who, n),
         np.full(n, np.inf),
-        np.full((n, 3), np.nan),
+        np.full((n, 4), np.nan),
+        np.zeros((n, 2 + 2 * n)),
         np.array([t[0], t[0], 0.0, -1.0]),
     )
 
@@ -319,6 +331,7 @@ def _save(carry: Carry, checkpoints: Checkpoints, b: int) -> None:
     """The filter's state ``carry`` into checkpoint ``b``."""
     checkpoints[0][b], checkpoints[1][b], checkpoints[2][b] = carry[0], carry[1], carry[2]
     checkpoints[3][b], checkpoints[4][b], checkpoints[5][b] = carry[3], carry[4], carry[5]
+    checkpoints[6][b] = carry[6]
 
 
 @compiled
@@ -327,6 +340,7 @@ def _restored(checkpoints: Checkpoints, b: int) -> Carry:
     return (
         checkpoints[0][b].copy(), checkpoints[1][b].copy(), checkpoints[2][b].copy(),
         checkpoints[3][b].copy(), checkpoints[4][b].copy(), checkpoints[5][b].copy(),
+        checkpoints[6][b].copy(),
     )  # fmt: skip
 
 
@@ -347,7 +361,7 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
     (t, who, z, r, rows), (a, q_accel, q_state, structure, links), marks = model[:3]
     still, landed, early = marks
     gate, start = model[3], model[4]
-    x, p, sensor_accepted, sensor_r, refused, clock = carry
+    x, p, sensor_accepted, sensor_r, refused, support, clock = carry
     (xf, pf, updates, holds), keep = kept
     gain_h, accepted, loglik, nu, released = verdicts
     reset, returning = start[2], start[3]
@@ -387,13 +401,20 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
                     episode = k
                 if not refused[3 + i, 0] > last_accepted:  # its first since then
                     refused[3 + i, 2] = t[k]
+                if not refused[3 + i, 0] > sensor_accepted[3 + i]:  # its first since its own
+                    refused[3 + i, 3] = k
+                    for j in range(n):  # every state's sums so far
+                        support[3 + i, 2 + 2 * j] = support[j, 0]
+                        support[3 + i, 3 + 2 * j] = support[j, 1]
                 refused[3 + i, 0], refused[3 + i, 1] = t[k], math.copysign(1.0, y)
-                seen = (t[k], r[k], hk[3 + i], last_accepted, sensor_accepted, sensor_r)
-                let = _release(3 + i, y, (seen, refused), p, early.size > 0 and early[k])
+                seen = (t[k], r[k], s, hk[3 + i], last_accepted, sensor_accepted, sensor_r)
+                let = _release(3 + i, y, (seen, refused, support), p, early.size > 0 and early[k])
                 if let:  # the innovation is the same, its variance grown
                     y, s = innovation(x, p, z[k], hk, r[k], ph)
                 if let == LET_AGREED and released.size:
                     released[episode] = True
+                if let == LET_LEANT and released.size:
+                    released[int(refused[3 + i, 3])] = True
             if nu.size:
                 nu[k] = y / math.sqrt(s)
         # the innovation gate: |y| <= gate sqrt(S)
@@ -409,6 +430,8 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
                 last_accepted = sensor_accepted[3 + i] = t[k]
                 episode = -1
                 sensor_r[3 + i] = r[k]
+                support[3 + i, 0] += y / s
+                support[3 + i, 1] += 1.0 / s
             if loglik.size:  # log N(y; 0, S)
                 loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
         if still[k] or landed[k]:
@@ -461,6 +484,40 @@ def _agreed(c: int, y: float, seen: tuple[float, FloatArray, FloatArray]) -> int
 
 
 @compiled
+def _leaning(
+    c: int, innovation: tuple[float, float], now: float, accepted: FloatArray, support: FloatArray
+) -> int:
+    """LEANT where a sensor other than state ``c``'s, accepted within AGREED_LOCKOUT_S, leans
+    with ``c``'s rejected sample (its innovation ``y`` and the variance ``S`` of it): over
+    ``c``'s rejections since its own last accepted sample, the other's accepted innovations
+    have a mean beyond LEAN_SIGMAS of its standard error on ``y``'s side, and within
+    LEAN_SIGMAS of ``y``; else 0. ``accepted``: per state its sensor's last accepted sample
+    [s]; ``support``: :data:`Carry`'s sums.
+
+    Where the estimate holds, each accepted innovation is ``N(0, S)``: the information-weighted
+    mean ``sum(y / S) / sum(1 / S)`` has the variance ``1 / sum(1 / S)``. Where it has gone
+    astray by ``d``, every sensor's innovations lean by ``d``: a barometer too noisy to fail the
+    gate says so over a handful of samples (a PX4 simulator's landing the logged IMU missed:
+    the estimate 0.18 m under a GPS and a barometer for 3 s, the GPS rejected throughout, the
+    barometer's samples passing, ``fused_std`` 0.024 m; now 0.12 m at most, on them again 0.6 s
+    after the touchdown)."""
+    y, s = innovation
+    for j in range(3, accepted.size):
+        if j == c or now - accepted[j] > AGREED_LOCKOUT_S:
+            continue
+        # the other's sums over c's episode of rejections
+        total = support[j, 0] - support[c, 2 + 2 * j]
+        weight = support[j, 1] - support[c, 3 + 2 * j]
+        if weight <= 0.0:
+            continue
+        mean = total / weight
+        leans = math.copysign(1.0, y) * mean * math.sqrt(weight) > LEAN_SIGMAS
+        if leans and (y - mean) ** 2 <= LEAN_SIGMAS**2 * (s + 1.0 / weight):
+            return LEANT
+    return 0
+
+
+@compiled
 def _silent(now: float, last_accepted: float, accepted: FloatArray, refused: FloatArray) -> bool:
     """Whether every sensor the estimate followed until the last accepted sample (``accepted``,
     per state its sensor's last accepted sample [s], within LOCKOUT_S of ``last_accepted``)
@@ -479,22 +536,25 @@ def _silent(now: float, last_accepted: float, accepted: FloatArray, refused: Flo
 def _release(
     c: int,
     y: float,
-    seen: tuple[tuple[float, float, float, float, FloatArray, FloatArray], FloatArray],
+    seen: tuple[
+        tuple[float, float, float, float, float, FloatArray, FloatArray], FloatArray, FloatArray
+    ],
     p: FloatArray,
     early: bool,
 ) -> int:
     """A sample of the sensor with state ``c`` fails the gate by the innovation ``y``: let
     loose what has gone astray, in place on the prior's covariance ``p``, and say what was
-    (LET_NOTHING, LET_LOST, LET_AGREED, LET_GROUND). ``seen``: the sample's time and variance,
-    its row of H at ``c``, the last accepted sample's time, per state its sensor's last
-    accepted sample [s] and that one's variance; and per state its sensor's rejections
-    (:data:`Carry`, this one among them). ``early``: the sample began an episode of
-    rejections that a pass before ended by letting the height loose where two sensors left it
-    together: it is let loose here, at the episode's first rejection, where its sensor was
-    followed (the episode's samples then count: a landing the logged IMU missed left the
-    smoothed height 0.6 m under its sensors for the 1.2 s they were rejected, its band 0.09
-    m)."""
-    (now, r, sign, last_accepted, sensor_accepted, sensor_r), refused = seen
+    (LET_NOTHING, LET_LOST, LET_AGREED, LET_GROUND, LET_LEANT). ``seen``: the sample's time,
+    variance and innovation's variance ``S``, its row of H at ``c``, the last accepted sample's
+    time, per state its sensor's last accepted sample [s] and that one's variance; and per
+    state its sensor's rejections and its accepted samples' sums (:data:`Carry`, this one
+    among them). ``early``: the sample began an episode of rejections that a pass before
+    ended by letting the height loose where two sensors left it together (or this one left it
+    and another leant its way): it is let loose here, at the episode's first rejection, where
+    its sensor was followed (the episode's samples then count: a landing the logged IMU missed
+    left the smoothed height 0.6 m under its sensors for the 1.2 s they were rejected, its band
+    0.09 m)."""
+    (now, r, s, sign, last_accepted, sensor_accepted, sensor_r), refused, support = seen
     y2 = y * y
     waited = now - last_accepted
     # only a sensor the estimate followed until it went astray can say where it went: one
@@ -506,15 +566,20 @@ def _release(
     agreed = 0
     if waited > AGREED_LOCKOUT_S:
         agreed = _agreed(c, y, (last_accepted, sensor_accepted, refused))
+    if not agreed and followed and now - sensor_accepted[c] > AGREED_LOCKOUT_S:
+        agreed = _leaning(c, (y, s), now, sensor_accepted, support)
     if followed and (early or agreed or waited > LOCKOUT_S):
         # no sample of any sensor passed the gate for LOCKOUT_S, or for AGREED_LOCKOUT_S where
-        # two sensors failed it on one side: the estimate, not every sensor, has gone astray
+        # two sensors failed it on one side, or one failed it and another leant its way: the
+        # estimate, not every sensor, has gone astray
         # (ArduPilot's EKF3 resets its height after 5 s); its height and velocity become as
         # uncertain as this sample says. Two sensors agreeing against a confident estimate
         # for 2.5 s left it 1.4 m under both after a PX4 simulator's landing (the touchdown
         # absent from the logged IMU)
         p[0, 0] += y2
         p[1, 1] += y2 / LOCKOUT_S**2
+        if agreed == LEANT and not early:
+            return LET_LEANT
         return LET_AGREED if early or agreed == AGREED_TOGETHER else LET_LOST
     if sign < 0.0 and now - sensor_accepted[c] > LOCKOUT_S:
         # a rangefinder alone has failed the gate for LOCKOUT_S while a sensor at least as
@@ -624,9 +689,9 @@ def _held(
     model: Model, span: tuple[int, int], carry: Carry, kept: tuple[Kept, bool], verdicts: Verdicts
 ) -> int:
     """:func:`_filter` over ``span``; how many of its events were held on the ground."""
-    first_held = int(carry[5][2])
+    first_held = int(carry[6][2])
     _filter(model, span, carry, kept, verdicts)
-    return int(carry[5][2]) - first_held
+    return int(carry[6][2]) - first_held
 
 
 @compiled
