@@ -551,7 +551,7 @@ def test_a_real_landing_is_back_on_its_sensors_within_a_second() -> None:
     assert run.referred.names == ("gps", "baro")
     assert np.isfinite(z[after]).all()
     assert np.abs(z[after, 0] - z[after, 1]).mean() < 0.06  # the two agree
-    assert np.max(np.abs(run.result.fused[after] - z[after, 0])) < 0.04  # 0.022; 0.139 before
+    assert np.max(np.abs(run.result.fused[after] - z[after, 0])) < 0.04  # 0.020; 0.139 before
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
