@@ -496,7 +496,7 @@ def test_a_real_log_s_sensor_stepped_2_m_is_its_jump_beside_the_others(stepped: 
 
 def _unlogged_landing(
     gps_m: float, baro_m: float, baro_every: int
-) -> tuple[np.ndarray, np.ndarray, dict[str, object], np.ndarray]:
+) -> tuple[np.ndarray, dict[str, object], np.ndarray, np.ndarray]:
     """A descent at 0.6 m/s that stops on the ground at 20 s, the touchdown absent from the
     logged IMU (a PX4 simulator's landing), a GPS ``gps_m`` noisy at 5 Hz and a barometer
     ``baro_m`` noisy every ``baro_every`` 50 Hz tick: the smoother's fused height, its

@@ -411,10 +411,10 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
                 let = _release(3 + i, y, (seen, refused, support), p, early.size > 0 and early[k])
                 if let:  # the innovation is the same, its variance grown
                     y, s = innovation(x, p, z[k], hk, r[k], ph)
-                if let == LET_AGREED and released.size:
-                    released[episode] = True
-                if let == LET_LEANT and released.size:
-                    released[int(refused[3 + i, 3])] = True
+                if released.size and let in (LET_AGREED, LET_LEANT):
+                    # the next pass lets the height loose at the episode's first rejection:
+                    # of any sensor, or where another leant with it, of this one
+                    released[episode if let == LET_AGREED else int(refused[3 + i, 3])] = True
             if nu.size:
                 nu[k] = y / math.sqrt(s)
         # the innovation gate: |y| <= gate sqrt(S)
