@@ -208,6 +208,36 @@ def test_the_land_detector_is_read_from_stat() -> None:
     assert landed.value[-1] == 0.0
 
 
+@pytest.mark.parametrize(
+    "log",
+    [
+        "ardupilot/diaven_sample01.bin",  # EV with its own TimeUS (Copter 4.0)
+        "truth/copter_3.4dev-solo_djnugent_climb154m_ekf1.BIN",  # EV with its Id alone
+    ],
+)
+def test_copters_take_offs_are_read_from_its_land_detectors_events(log: str) -> None:
+    """Copter logs no state of its land detector, only its changes: NOT_LANDED (``EV`` 28)
+    when it says the vehicle left the ground; in Copter 3.4 the record has no time, and takes
+    that of the record before it, as pymavlink's reader does."""
+    path = shared_log(log)
+    m = mavutil.mavlink_connection(str(path))
+    said, clock = [], 0.0
+    try:
+        while (msg := m.recv_match()) is not None:
+            fields = msg.get_fieldnames()
+            if "TimeUS" in fields:
+                clock = msg.TimeUS / 1e6
+            elif "TimeMS" in fields and msg.get_type() != "GPS":
+                clock = msg.TimeMS / 1e3
+            if msg.get_type() == "EV" and msg.Id == 28:
+                said.append(clock)
+    finally:
+        m.close()
+    takeoffs = read_log(path).takeoffs
+    assert len(takeoffs) == len(said) >= 1
+    np.testing.assert_allclose(takeoffs, said, atol=0.05)
+
+
 def test_records_read_again_once_let_go_are_the_same() -> None:
     # the reader lets each type's records go once read (a 300 MB log's: 92 MB at once); one
     # read again is gathered again, not lost

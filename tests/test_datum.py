@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from altfuse.align import Aligned
-from altfuse.datum import Track, Wind, dynamic_head, refer_to_takeoff, referred_samples
+from altfuse.datum import (
+    Track,
+    Wind,
+    detector_takeoffs,
+    dynamic_head,
+    refer_to_takeoff,
+    referred_samples,
+)
 from altfuse.fuse import FusionInput
 from altfuse.fuse.support import SupportParams, fuse_support
 from altfuse.model import Samples, Series
@@ -493,3 +500,61 @@ def test_a_segment_resumed_in_a_cruise_that_climbs_keeps_the_main_datum() -> Non
     standing = Samples(t, np.where((t >= 110) & (t < 135), 0.2, 5.0))
     own = refer_to_takeoff(aligned, splices=[110.0], track=Track(standing))
     assert own.segments[1].datum.startswith("its own, ground before take-off at 13")
+
+
+def warming_on_the_ground() -> tuple[Aligned, np.ndarray]:
+    """A copter's barometer warming on the ground: 0.03 m/s for the 75 s it stands (2.2 m), a
+    hop to 1 m at 176 s; the GPS 3 m noisy. 10 Hz."""
+    rng = np.random.default_rng(3)
+    t = 100.0 + np.arange(1200) / 10.0
+    h = np.interp(t, [176.0, 177.0, 200.0, 201.0], [0.0, 1.0, 1.0, 0.0])
+    baro = 0.03 * np.minimum(t - 100.0, 75.0) + h + rng.normal(0, 0.05, t.size)
+    gps = 40.0 + h + rng.normal(0, 3.0, t.size)
+    names = ("gps", "baro")
+    return Aligned(t, names, names, np.column_stack([gps, baro]), 10.0, 1.0, "union", {}), h
+
+
+def test_a_warming_barometer_is_no_take_off_while_the_land_detector_says_landed() -> None:
+    """ArduPilot's Copter logs when its land detector says the vehicle left the ground
+    (``EV`` NOT_LANDED, 175 s here, at the motors' spool-up): the barometer's 1 m rise over
+    its first 5 s comes at 135 s, on the ground; the one after 175 s is the take-off, and the
+    hop reads 1 m above the ground the vehicle left, not 1 m + 2 m of warming."""
+    aligned, _ = warming_on_the_ground()
+    plain = refer_to_takeoff(aligned)
+    assert plain.takeoff_s == pytest.approx(135.0, abs=2.0)
+    told = refer_to_takeoff(aligned, takeoffs=(175.0,))
+    assert told.takeoff_s == pytest.approx(177.0, abs=0.3)  # the rise after 175 s
+    assert not told.detected  # a rise: held still up to STILL_MARGIN_S before it
+    hop = (aligned.t > 180.0) & (aligned.t < 195.0)
+    assert np.median(told.h[hop, 1]) == pytest.approx(1.0, abs=0.1)
+    assert np.median(plain.h[hop, 1]) > 2.0
+    baro = {o.name: o for o in told.offsets}["baro"]
+    assert baro.method == "median over the ground before take-off at 177.1 s"
+
+
+def test_a_hop_lower_than_the_rise_takes_off_where_the_land_detector_says() -> None:
+    aligned, h = warming_on_the_ground()
+    z = aligned.z.copy()
+    z[:, 1] -= 0.6 * h  # a 0.4 m hop: no 1 m rise after the detector's take-off
+    low = Aligned(aligned.t, aligned.names, aligned.kinds, z, 10.0, 1.0, "union", {})
+    ref = refer_to_takeoff(low, takeoffs=(175.0,))
+    assert ref.takeoff_s == 175.0
+    assert ref.detected
+    assert ref.on_ground_s == (pytest.approx(169.0), pytest.approx(174.0))  # all the window
+    assert "(the autopilot's land detector)" in {o.name: o for o in ref.offsets}["baro"].method
+
+
+def test_a_land_detector_before_the_log_leaves_the_take_off_to_the_rise() -> None:
+    """Said flying before the reference's first sample (or before the segment): no ground
+    window before it to stand on; the rise decides as without it."""
+    aligned, _ = flight()
+    plain = refer_to_takeoff(aligned)
+    for said in (50.0, 100.5):  # before the clock, in the log's first second
+        ref = refer_to_takeoff(aligned, takeoffs=(said,))
+        assert (ref.takeoff_s, ref.ground_window_s) == (plain.takeoff_s, plain.ground_window_s)
+
+
+def test_the_take_offs_of_a_sampled_verdict_are_its_turns_from_landed_to_flying() -> None:
+    landed = Samples(np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]), np.array([1, 1, 0, 0, 1, 0.0]))
+    assert detector_takeoffs(landed) == (3.0, 6.0)
+    assert detector_takeoffs(None) == ()

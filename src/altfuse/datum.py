@@ -8,9 +8,11 @@ with one constant offset ``c_i``, found in this order:
 1. **On the ground**: the median of the source over the *ground window*, the ``ground_s`` seconds
    that end one second before take-off. Take-off is the first tick at which the reference source
    (the first barometer, else the first GPS, else the rangefinder; 1 s running median) rises
-   ``climb_m`` above its level over the first ``ground_s`` seconds of the log. A log with no such
-   rise (a log that starts in flight, a bench test) uses its first ``ground_s`` seconds instead,
-   and says so.
+   ``climb_m`` above its level over the first ``ground_s`` seconds of the log; where the
+   autopilot's land detector tells when the vehicle left the ground, the first such rise after
+   the first of those times, above the level over the ``ground_s`` seconds before it, or
+   without one that time (:func:`_refer_segment`). A log with no such rise (a log that starts
+   in flight, a bench test) uses its first ``ground_s`` seconds instead, and says so.
 2. **Matched to the reference**: a source with no samples in the ground window (a GPS without a
    fix at take-off, a rangefinder out of range on the ground) takes the median of its difference
    from the referred reference over the first ``ground_s`` seconds where both are valid.
@@ -292,6 +294,7 @@ class Referred:
     on_real_ground: bool = False  # the ground window lies before a detected take-off
     steps: tuple[Step, ...] = ()  # between two sensors' heights (:mod:`altfuse.steps`)
     wind: Wind | None = None  # the main segment's, as its barometers' scale fits told it
+    detected: bool = False  # the take-off is the autopilot's land detector's, not a rise
 
     @property
     def datum_windows(self) -> tuple[tuple[float, float] | None, ...]:
@@ -302,14 +305,16 @@ class Referred:
 
     @property
     def on_ground_s(self) -> tuple[float, float] | None:
-        """The span in which the vehicle stood still at the take-off point: the ground window
-        up to ``STILL_MARGIN_S`` before a detected take-off; None if it is empty, or there was
-        no take-off or no ground before it (a log begun in flight: held at 0 there, a climb
+        """The span in which the vehicle stood still at the take-off point: the ground window,
+        up to ``STILL_MARGIN_S`` before a take-off found where the reference rose (the
+        autopilot's land detector says it before the lift-off); None if it is empty, or there
+        was no take-off or no ground before it (a log begun in flight: held at 0 there, a climb
         took the smoother 3.4 m off every sensor for the whole flight)."""
         if self.takeoff_s is None or not self.on_real_ground:
             return None
         lo, hi = self.ground_window_s
-        hi = min(hi, self.takeoff_s - STILL_MARGIN_S)
+        if not self.detected:
+            hi = min(hi, self.takeoff_s - STILL_MARGIN_S)
         return (lo, hi) if hi > lo else None
 
 
@@ -366,17 +371,64 @@ def _smoothed(h: FloatArray, rate_hz: float) -> FloatArray:
 
 
 def detect_takeoff(
-    t: FloatArray, h: FloatArray, smooth: FloatArray, ground_s: float, climb_m: float
+    t: FloatArray,
+    h: FloatArray,
+    smooth: FloatArray,
+    ground_s: float,
+    climb_m: float,
+    since: float | None = None,
 ) -> float | None:
     """First time [s] at which ``h`` (``smooth``: :func:`_smoothed`) rises ``climb_m`` above its
-    start."""
+    level over the log's first ``ground_s`` seconds; or, ``since`` the autopilot's land
+    detector said the vehicle flies, above its level over the ``ground_s`` seconds before that
+    and after it (a barometer warming on the ground rises as well: a copter's rose 1 m in 30 s
+    of the 72 s it stood before take-off)."""
     valid = np.isfinite(h)
-    start = _first_seconds(valid, t, ground_s)
+    if since is None:
+        start, after = _first_seconds(valid, t, ground_s), valid
+    else:
+        start, after = valid & (t > since - ground_s) & (t <= since), valid & (t >= since)
     if not start.any():
         return None
     ground = float(np.median(h[start]))
-    above = np.flatnonzero(valid & (smooth > ground + climb_m))
+    above = np.flatnonzero(after & (smooth > ground + climb_m))
     return float(t[above[0]]) if above.size else None
+
+
+def detector_takeoffs(landed: Samples | None) -> tuple[float, ...]:
+    """The times [s] at which the autopilot's land detector (``landed``: its verdict, 1 on the
+    ground) turns from landed to flying."""
+    if landed is None or landed.t.size < 2:
+        return ()
+    order = np.argsort(landed.t, kind="stable")
+    t, on = landed.t[order], landed.value[order] > 0.5
+    return tuple(float(x) for x in t[np.flatnonzero(on[:-1] & ~on[1:]) + 1])
+
+
+def _ground_before(
+    takeoff: float | None,
+    clock: tuple[FloatArray, npt.NDArray[np.bool_], FloatArray],
+    ground_s: float,
+    climb_m: float,
+) -> tuple[npt.NDArray[np.bool_], str, bool]:
+    """The ground window before ``takeoff`` on the ``clock`` (its ticks, where the reference
+    is valid, the reference smoothed: :func:`_smoothed`), how it was found, and whether the
+    vehicle stood there (empty, and why not, where it did not)."""
+    t, ref_valid, smooth = clock
+    window = np.zeros(t.size, dtype=bool)
+    if takeoff is None:
+        return window, "first seconds of the log (no take-off found)", False
+    if t[ref_valid][0] >= takeoff - TAKEOFF_MARGIN_S:
+        return window, "first seconds of the log (take-off too early for a ground window)", False
+    end = takeoff - TAKEOFF_MARGIN_S
+    window = (t >= end - ground_s) & (t <= end)
+    if not (window & ref_valid).any():
+        return window, "first seconds of the log (no reference sample before take-off)", False
+    if _moving(smooth, window & ref_valid, climb_m):
+        # a log begun in flight: its first seconds are a climb, not a ground
+        window = np.zeros(t.size, dtype=bool)
+        return window, "first seconds of the log (moving before take-off was found)", False
+    return window, f"ground before take-off at {takeoff:.1f} s", True
 
 
 def _moving(smooth: FloatArray, window: npt.NDArray[np.bool_], climb_m: float) -> bool:
@@ -384,6 +436,17 @@ def _moving(smooth: FloatArray, window: npt.NDArray[np.bool_], climb_m: float) -
     ticks of ``window``: the vehicle did not stand there."""
     there = smooth[window]
     return bool(there.size) and float(np.nanmax(there) - np.nanmin(there)) >= climb_m
+
+
+@dataclass(frozen=True)
+class _Told:
+    """What the log tells the datum beside the heights: what rangefinders read when landed
+    [m] by name, the GPS's ground track, the times the autopilot's land detector said the
+    vehicle left the ground."""
+
+    clearances: Mapping[str, float]
+    track: Track | None
+    takeoffs: Sequence[float]
 
 
 def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what the log tells)
@@ -395,6 +458,7 @@ def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what t
     clearances: Mapping[str, float] | None = None,
     splices: Sequence[float] = (),
     track: Track | None = None,
+    takeoffs: Sequence[float] = (),
 ) -> Referred:
     """Subtract from each source its offset (and scale) to height above take-off, segment by
     segment (see module doc).
@@ -404,21 +468,24 @@ def refer_to_takeoff(  # noqa: PLR0913 (keyword-only beyond the referral: what t
     as a whole log is; another with its own take-off, from a ground window in which the GPS's
     ground speed (``track``, where the log has one) says the vehicle stood, gets its own datum;
     one without (a log resumed in flight) the main segment's offsets and scales.
+
+    ``takeoffs``: the times [s] at which the autopilot's land detector said the vehicle left
+    the ground (:func:`detector_takeoffs`), where the log tells: the take-off is the
+    reference's first rise after the first of them, or that time (see :func:`_refer_segment`).
     """
     t = aligned.t
+    told = _Told(dict(clearances or {}), track, takeoffs)
     cuts = [0, *np.searchsorted(t, np.asarray(splices, dtype=np.float64)).tolist(), t.size]
     pieces = [(a, b) for a, b in itertools.pairwise(cuts) if b > a]
     if len(pieces) == 1:
-        return _refer_segment(
-            aligned, ground_window_s, takeoff_climb_m, referral, clearances, track
-        )
+        return _refer_segment(aligned, ground_window_s, takeoff_climb_m, referral, told)
     valid = np.asarray(np.isfinite(aligned.z).any(axis=1), dtype=bool)
     main = max(pieces, key=lambda p: int(valid[p[0] : p[1]].sum()))
-    options = (ground_window_s, takeoff_climb_m, referral, clearances)
+    options = (ground_window_s, takeoff_climb_m, referral, told)
     owns = {
-        (a, b): _refer_segment(aligned.part(a, b), *options, track)
+        (a, b): _refer_segment(aligned.part(a, b), *options)
         if (a, b) == main
-        else _own_datum(aligned.part(a, b), *options, track)
+        else _own_datum(aligned.part(a, b), *options)
         for a, b in pieces
     }
     # a barometer's scale is the sensor's, whichever segment tells it best
@@ -498,20 +565,19 @@ def _own_datum(
     ground_window_s: float,
     takeoff_climb_m: float,
     referral: Referral,
-    clearances: Mapping[str, float] | None,
-    track: Track | None,
+    told: _Told,
 ) -> Referred | None:
     """A segment's own referral, where it has a take-off and a ground window before it, and
-    the vehicle stood in that window where the GPS's ground speed tells (``track``; see
+    the vehicle stood in that window where the GPS's ground speed tells (``told.track``; see
     ``GROUND_MAX_SPEED_M_S``)."""
     try:
-        own = _refer_segment(part, ground_window_s, takeoff_climb_m, referral, clearances, track)
+        own = _refer_segment(part, ground_window_s, takeoff_climb_m, referral, told)
     except NoUsableSensorsError:
         return None
     if not own.on_real_ground:
         return None
-    if track is not None:
-        speed = track.speed
+    if told.track is not None:
+        speed = told.track.speed
         lo, hi = own.ground_window_s
         inside = (speed.t >= lo) & (speed.t <= hi) & np.isfinite(speed.value)
         if inside.any() and np.median(speed.value[inside]) > GROUND_MAX_SPEED_M_S:
@@ -524,8 +590,7 @@ def _refer_segment(
     ground_window_s: float,
     takeoff_climb_m: float,
     referral: Referral,
-    clearances: Mapping[str, float] | None,
-    track: Track | None = None,
+    told: _Told,
 ) -> Referred:
     """:func:`refer_to_takeoff` of one segment.
 
@@ -540,44 +605,46 @@ def _refer_segment(
     referral
         ``full``: each barometer's scale too, where the flight can tell it (:func:`baro_scales`);
         ``offset``: offsets only.
-    clearances
+    told
         What a rangefinder reads when landed [m] by name (``RNGFNDn_GNDCLEAR``): its offset
         when it has no valid reading in the ground window (its ground readings below its
-        minimum range), rather than one matched in flight to a barometer that may drift.
-    track
-        The GPS's ground speed and course, where the log has them: a barometer's scale is
-        fitted beside its dynamic pressure in a wind (:func:`baro_scales`).
+        minimum range), rather than one matched in flight to a barometer that may drift. The
+        GPS's ground speed and course, where the log has them: a barometer's scale is fitted
+        beside its dynamic pressure in a wind (:func:`baro_scales`). The times the autopilot's
+        land detector said the vehicle left the ground: the first of them in the segment is
+        where the reference's rise is sought from, or, without a rise after it (a hop lower
+        than ``takeoff_climb_m``), the take-off itself.
     """
     ground_s, climb_m = ground_window_s, takeoff_climb_m
     t, z = aligned.t, aligned.z
     ref = choose_reference(aligned)
     ref_valid = np.isfinite(z[:, ref])
     smooth = _smoothed(z[:, ref], aligned.rate_hz)
-    takeoff = detect_takeoff(t, z[:, ref], smooth, ground_s, climb_m)
-    window = np.zeros(t.size, dtype=bool)
-    real = False
-    if takeoff is None:
-        ground_how = "first seconds of the log (no take-off found)"
-    elif t[ref_valid][0] >= takeoff - TAKEOFF_MARGIN_S:
-        ground_how = "first seconds of the log (take-off too early for a ground window)"
-    else:
-        end = takeoff - TAKEOFF_MARGIN_S
-        window = (t >= end - ground_s) & (t <= end)
-        ground_how = f"ground before take-off at {takeoff:.1f} s"
-        real = bool((window & ref_valid).any())
-        if not real:
-            ground_how = "first seconds of the log (no reference sample before take-off)"
-        elif _moving(smooth, window & ref_valid, climb_m):
-            # a log begun in flight: its first seconds are a climb, not a ground
-            real, window = False, np.zeros(t.size, dtype=bool)
-            ground_how = "first seconds of the log (moving before take-off was found)"
+    heights = (t, z[:, ref], smooth)
+    flagged = next((x for x in told.takeoffs if t[0] <= x <= t[-1]), None)
+    # the first rise once the autopilot says the vehicle flies, else the time it says so (a
+    # hop lower than ``climb_m``), else the first rise
+    found = [(detect_takeoff(*heights, ground_s, climb_m), "")]
+    if flagged is not None:
+        found[:0] = [
+            (detect_takeoff(*heights, ground_s, climb_m, flagged), ""),
+            (flagged, " (the autopilot's land detector)"),
+        ]
+    for takeoff, told_by in found:
+        window, ground_how, real = _ground_before(
+            takeoff, (t, ref_valid, smooth), ground_s, climb_m
+        )
+        if real:
+            ground_how += told_by
+            break
+    detected = real and bool(told_by)
     if not (window & ref_valid).any():
         window = _first_seconds(ref_valid, t, ground_s)
     win_idx = np.flatnonzero(window & ref_valid)
     ground_window = (float(t[win_idx[0]]), float(t[win_idx[-1]]))
 
     ground = _Ground(
-        window, ground_how, ground_s, ref, dict(clearances or {}), real, takeoff if real else None
+        window, ground_how, ground_s, ref, told.clearances, real, takeoff if real else None
     )
     offsets, h, dropped = _refer(aligned, ground, {})
     referred = sorted(offsets)
@@ -587,7 +654,7 @@ def _refer_segment(
     )  # fmt: skip
     wind = None
     if referral == "full":
-        scales = baro_scales(aligned, h, offsets, steps, track)
+        scales = baro_scales(aligned, h, offsets, steps, told.track)
         wind = max(
             (sc.wind for sc in scales.values() if sc.wind is not None),
             key=lambda w: w.sigmas,
@@ -618,6 +685,7 @@ def _refer_segment(
         dropped=dropped,
         on_real_ground=real,
         steps=steps,
+        detected=detected,
         wind=wind,
     )
 

@@ -189,6 +189,9 @@ class FlightLog:
     vertical_velocity: Series | None = None  # a GPS's vertical velocity up [m/s], "velocity"
     vibration: Vibration | None = None
     landed: Series | None = None  # the autopilot's own verdict: 1 on the ground, 0 flying
+    # where the log has no verdict but its changes (Copter's EV records): the times [s] at
+    # which the autopilot's land detector said the vehicle left the ground
+    takeoffs: tuple[float, ...] = ()
     temperatures: dict[str, Series] = field(default_factory=dict)  # [degC] by sensor name
     # samples of the inputs beside the altitudes (IMU, ATT, ...) dropped by screening, by source
     dropped_inputs: dict[str, int] = field(default_factory=dict)

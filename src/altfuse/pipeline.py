@@ -20,6 +20,7 @@ from altfuse.datum import (
     Segment,
     Track,
     Wind,
+    detector_takeoffs,
     refer_to_takeoff,
     referred_samples,
     tilt_correct,
@@ -176,6 +177,7 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
         clearances=ground_clearances(flight),
         splices=splices(aligned, None if flight.imu is None else flight.imu.t),
         track=_track(flight),
+        takeoffs=sorted((*flight.takeoffs, *detector_takeoffs(_samples(flight.landed)))),
     )
     log.info(
         "%s: aligned %d ticks in %.2f s, datum in %.2f s",

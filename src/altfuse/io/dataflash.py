@@ -64,7 +64,7 @@ log = logging.getLogger(__name__)
 _SENSOR_TYPES = ("GPS", "GPS2", "GPS3", "BARO", "BAR2", "BAR3", "RFND", "SONR", "CTUN")
 _OTHER_TYPES = (
     "IMU", "ATT", "XKF1", "NKF1", "ORGN", "AHR2", "POS", "SIM", "MSG", "VER", "FMTU", "PARM",
-    "VIBE", "STAT", "GPA", "GPA2", "GPA3",
+    "VIBE", "STAT", "GPA", "GPA2", "GPA3", "EV",
 )  # fmt: skip
 WANTED_TYPES = frozenset(_SENSOR_TYPES + _OTHER_TYPES)
 _UNIT_TYPES = frozenset({"UNIT", "MULT"})  # read with FMTU for the fields' units
@@ -607,6 +607,36 @@ def _read_landed(rec: _Records) -> Series | None:
     return Series("landed", "landed", "STAT.isFlying == 0", "on the ground", t[keep], value)
 
 
+#: Copter's land detector logs no verdict, only its changes, as ``EV`` records: this one
+#: (``LogEvent::NOT_LANDED`` in AP_Logger.h) when it says the vehicle has left the ground.
+EV_NOT_LANDED = 28
+
+
+def _read_takeoffs(rec: _Records) -> tuple[float, ...]:
+    """The times [s] at which Copter's land detector said the vehicle left the ground."""
+    if not rec.has("EV", "Id"):
+        return ()
+    t = _event_times(rec)[rec.raw("EV", "Id") == EV_NOT_LANDED]
+    return tuple(sorted(float(x) for x in t[np.isfinite(t)]))
+
+
+def _event_times(rec: _Records) -> FloatArray:
+    """The ``EV`` records' times [s]: their own, else (Copter up to 3.4 logs ``EV`` with its
+    ``Id`` alone) the time of the last record before each of the most frequent timed type
+    read (NaN before the first)."""
+    if rec.timed("EV"):
+        return rec.times("EV")
+    clocks = [n for n in sorted(WANTED_TYPES) if n != "EV" and rec.timed(n)]
+    if not clocks:
+        return np.full(rec.n("EV"), np.nan)
+    clock = max(clocks, key=rec.n)
+    index = rec.index
+    at = index.offsets[index.types == rec.formats["EV"].type_id]
+    before = np.searchsorted(index.offsets[index.types == rec.formats[clock].type_id], at) - 1
+    times = np.append(rec.times(clock), np.nan)  # index -1: before the first
+    return np.asarray(times[before])
+
+
 def _read_imu(rec: _Records) -> Imu | None:
     if not rec.timed("IMU", "AccX", "AccY", "AccZ"):
         return None
@@ -654,6 +684,7 @@ def read_dataflash(path: str | Path) -> FlightLog:
 def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     """The flight in ``rec``, the log at ``path`` whose sha256 ``digest`` is computing."""
     b = _Builder(rec)
+    takeoffs = _read_takeoffs(rec)  # before any type goes: an old log's EV takes their times
     _read_gps(b)
     rec.done("GPA", "GPA2", "GPA3")
     have_baro = _read_baro(b)
@@ -702,6 +733,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
         vertical_velocity=climb,
         vibration=vibration,
         landed=_read_landed(rec),
+        takeoffs=takeoffs,
         temperatures=b.temperatures,
     )
 
