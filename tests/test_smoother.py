@@ -554,6 +554,36 @@ def test_a_real_landing_is_back_on_its_sensors_within_a_second() -> None:
     assert np.max(np.abs(run.result.fused[after] - z[after, 0])) < 0.04  # 0.020; 0.139 before
 
 
+@pytest.mark.parametrize("step_m", [0.0, 3.0])
+def test_a_land_detector_saying_landed_in_a_descent_is_not_held(step_m: float) -> None:
+    """A land detector can say landed in the air: Copter 3.4's did in a 10 m/s descent from
+    150 m, its motors at their lower limit. Here one says landed from 11 s, in an 8 m/s
+    descent from 50 m to 10 m (12-17 s): held at v = 0 from 13 s, the height ended 5.2 m off
+    both sensors, every sample of theirs rejected. The sensors agree it sinks: no hold, 0.11 m
+    at most. A step of one sensor on the ground (its GPS 3 m up, the barometer still) is no
+    climb: the hold stays."""
+    rng = np.random.default_rng(5)
+    dt = 0.02
+    t = np.arange(0.0, 40.0, dt)
+    h = np.interp(t, [0.0, 12.0, 17.0, 40.0], [50.0, 50.0, 10.0, 10.0])
+    if step_m:
+        h = np.zeros_like(t)  # on the ground all along
+    a = np.gradient(np.gradient(h, t), t) + rng.normal(0.0, 0.05, t.size)
+    gps = h + rng.normal(0.0, 0.3, t.size) + np.where(t >= 25.0, step_m, 0.0)
+    z = np.column_stack([gps, h + rng.normal(0.0, 0.1, t.size)])
+    z[np.arange(t.size) % 10 != 0, 0] = np.nan  # the GPS at 5 Hz, the barometer at 10 Hz
+    z[np.arange(t.size) % 5 != 0, 1] = np.nan
+    inputs = FusionInput.from_heights(z, dt, kinds=("gps", "baro"), accel_up=a)
+    said = Samples(np.array([0.0, 11.0, 11.0, 40.0]), np.array([0.0, 0.0, 1.0, 1.0]))
+    res = fuse_smoother(replace(inputs, landed=said), SmootherParams())
+    if step_m:
+        assert res.params["landed_held_s"] == pytest.approx(25.0, abs=0.1)  # 13-38 s
+        assert np.nanmax(np.abs(res.fused)) < 0.15  # 0.07: the GPS's step is its own
+        return
+    assert res.params["landed_held_s"] == 0.0
+    assert np.nanmax(np.abs(res.fused - h)) < 0.2  # 0.11; 5.2 m held
+
+
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_an_accelerometer_impulse_is_recovered_from_within_2_s(sign: float) -> None:
     """Issue 15: one 25 Hz IMU sample worth +-20 m/s (an impact, a clipped sample), GPS and

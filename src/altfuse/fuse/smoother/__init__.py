@@ -301,6 +301,7 @@ from altfuse.fuse.smoother.model import (
     first_height,
     landed_events,
     reset_events,
+    sensed_climb,
     still_events,
     thermal_regressors,
     unpinned_scales,
@@ -441,7 +442,8 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
         params.gps_correlation_s,
     )
     q_events, terrain = state_noise(inputs, times, params.offset_noise_m2_s)
-    landed = landed_events(times, who, inputs.landed, inputs.speed) & ~still
+    climb = None if inputs.landed is None else sensed_climb(inputs.t, inputs.z, inputs.dt_s)
+    landed = landed_events(times, who, inputs.landed, inputs.speed, climb) & ~still
     ev = Events(
         times, who, values, a, q_events, still, q_accel + q_added, use_imu, params.gate_sigma,
         first_height(who, values),

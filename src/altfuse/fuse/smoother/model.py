@@ -15,7 +15,7 @@ from altfuse.datum import DYNAMIC_PRIOR, GROUND_MAX_SPEED_M_S, dynamic_head
 from altfuse.fuse.smoother.compiled import compiled
 from altfuse.fuse.smoother.events import TICK, VELOCITY
 from altfuse.fuse.smoother.kalman import innovation, update
-from altfuse.metrics import mad_sigma, runs
+from altfuse.metrics import mad_sigma, running_median, runs
 from altfuse.model import FloatArray, Samples
 
 #: Accelerometer bias random walk [m^2/s^5].
@@ -61,8 +61,9 @@ Q_DRIFT = 1e-5
 #: 0.91; a static PX4 log 0.0083 -> 0.0066 m; the rest within 0.6 mm; the simulated flights'
 #: coverage 95.2 -> 95.0 %, within 10 % of the best on the same 158 of 159.
 STILL_SIGMA = 0.005
-#: The autopilot's landed verdict is trusted this long [s] inside each of its landed spans, and
-#: while the GPS says the vehicle moves slower than GROUND_MAX_SPEED_M_S.
+#: The autopilot's landed verdict is trusted this long [s] inside each of its landed spans,
+#: while the GPS says the vehicle moves slower than GROUND_MAX_SPEED_M_S, and where the height
+#: sensors do not agree it climbs or sinks faster than that (:func:`landed_events`).
 LANDED_MARGIN_S = 2.0
 #: What a splice resets (the rows of :func:`reset_states`): nothing, where the vehicle is (a
 #: log resumed in flight, its sensors' offsets the main segment's), and where the vehicle is
@@ -168,13 +169,20 @@ def first_height(who: np.ndarray, z: FloatArray, start: int = 0, default: float 
 
 
 def landed_events(
-    times: FloatArray, who: np.ndarray, landed: Samples | None, speed: Samples | None
+    times: FloatArray,
+    who: np.ndarray,
+    landed: Samples | None,
+    speed: Samples | None,
+    climb: Samples | None = None,
 ) -> np.ndarray:
     """The clock ticks at which the vehicle stands on the ground by the autopilot's own land
     detector (``landed``: PX4's ``vehicle_land_detected``, ArduPilot's ``STAT.isFlying``), each
     landed span less ``LANDED_MARGIN_S`` at either end (a detector decides with a delay), and
     not where the GPS says it rolls faster than ``GROUND_MAX_SPEED_M_S`` (a plane taxiing on a
-    sloping field climbs with it). There the smoother holds v = 0."""
+    sloping field climbs with it). There the smoother holds v = 0. A span in which the
+    sensors climb or sink that fast (``climb``: :func:`sensed_climb`) is no landing at all: a
+    detector can say landed in the air (Copter 3.4's did in a 10 m/s descent, its motors at
+    their lower limit), and a descent held at v = 0 ends metres off every sensor."""
     out = np.zeros(times.size, dtype=bool)
     if landed is None or landed.t.size == 0:
         return out
@@ -183,6 +191,10 @@ def landed_events(
     for a, b in runs(on):  # the spans [start, end) over which the verdict is "landed"
         lo = t[a] + LANDED_MARGIN_S
         hi = (t[b] if b < t.size else t[-1]) - LANDED_MARGIN_S
+        if climb is not None:
+            inside = (climb.t >= lo) & (climb.t <= hi)
+            if np.any(np.abs(climb.value[inside]) > GROUND_MAX_SPEED_M_S):
+                continue
         out |= (times >= lo) & (times <= hi)
     out &= who == -1
     if speed is not None and speed.t.size:
@@ -190,6 +202,23 @@ def landed_events(
         rolling = np.interp(times, speed.t[order], speed.value[order]) > GROUND_MAX_SPEED_M_S
         out &= ~rolling
     return out
+
+
+def sensed_climb(t: FloatArray, z: FloatArray, dt_s: float) -> Samples:
+    """The vertical speed [m/s] the height sensors agree on at the ticks ``t`` (``z``: one
+    column each): each one's change over the last second of its 1 s running median, the
+    slowest of them where all go one way (one sensor's step is no climb), else 0; NaN where
+    fewer than two tell one."""
+    n = max(1, round(1.0 / dt_s))
+    rates = np.full(z.shape, np.nan)
+    for i in range(z.shape[1]):
+        smooth = running_median(z[:, i], n)
+        rates[n:, i] = (smooth[n:] - smooth[:-n]) / (t[n:] - t[:-n])
+    told = np.isfinite(rates).sum(axis=1) >= 2
+    up = np.where(np.isfinite(rates), rates, np.inf).min(axis=1)
+    down = np.where(np.isfinite(rates), rates, -np.inf).max(axis=1)
+    agreed = np.where(up > 0.0, up, np.where(down < 0.0, down, 0.0))
+    return Samples(t, np.where(told, agreed, np.nan))
 
 
 def thermal_regressors(
