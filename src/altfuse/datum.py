@@ -47,7 +47,7 @@ import numpy.typing as npt
 from altfuse.align import Aligned, merge_duplicates
 from altfuse.errors import NoUsableSensorsError
 from altfuse.inertial import G
-from altfuse.metrics import MAD_TO_SIGMA, running_median
+from altfuse.metrics import MAD_TO_SIGMA, running_median, runs
 from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Samples, SensorKind, Series
 from altfuse.steps import Step, find_steps
 
@@ -402,7 +402,8 @@ def detector_takeoffs(landed: Samples | None) -> tuple[float, ...]:
         return ()
     order = np.argsort(landed.t, kind="stable")
     t, on = landed.t[order], landed.value[order] > 0.5
-    return tuple(float(x) for x in t[np.flatnonzero(on[:-1] & ~on[1:]) + 1])
+    # each landed span's end, where one follows: as the smoother reads the spans
+    return tuple(float(t[end]) for _, end in runs(on) if end < t.size)
 
 
 def _ground_before(
@@ -626,10 +627,8 @@ def _refer_segment(
     # hop lower than ``climb_m``), else the first rise
     found = [(detect_takeoff(*heights, ground_s, climb_m), "")]
     if flagged is not None:
-        found[:0] = [
-            (detect_takeoff(*heights, ground_s, climb_m, flagged), ""),
-            (flagged, " (the autopilot's land detector)"),
-        ]
+        after = detect_takeoff(*heights, ground_s, climb_m, flagged)
+        found = [(after, ""), (flagged, " (the autopilot's land detector)"), *found]
     for takeoff, told_by in found:
         window, ground_how, real = _ground_before(
             takeoff, (t, ref_valid, smooth), ground_s, climb_m
