@@ -330,6 +330,45 @@ def test_help_and_version_load_nothing_heavy(argv: list[str]) -> None:
     assert done.stdout.strip().splitlines()[-1] == "[]"
 
 
+#: A run of the console command (``main``) that says, in a destructor the interpreter's
+#: teardown would call, whether it was torn down.
+TORN_DOWN = (
+    "import sys\nfrom altfuse.cli import main\n"
+    "class Witness:\n    def __del__(self):\n        print('torn down', flush=True)\n"
+    "witness = Witness()\nsys.argv = ['altfuse', *sys.argv[1:]]\nmain()\n"
+)
+
+
+@pytest.mark.parametrize(
+    ("argv", "code"),
+    [(["fuse", "{log}", "-o", "{out}"], 0), (["fuse", "{missing}", "-o", "{out}"], 1),
+     (["fuse", "{log}", "-o", "{out}", "--rate", "-1"], 2)],
+)  # fmt: skip
+def test_the_command_ends_with_its_exit_code_without_the_teardown(
+    tmp_path: Path, argv: list[str], code: int
+) -> None:
+    """Issue 17: the process ends once every exit handler has run, with the command's own
+    exit code, its outputs whole, and without the interpreter freeing its modules object by
+    object (0.12-0.2 s of a 0.9 s run on the sample log)."""
+    out = tmp_path / "out.csv"
+    paths = {"log": SAMPLE_LOG, "missing": tmp_path / "none.bin", "out": out}
+    done = subprocess.run(
+        [sys.executable, "-c", TORN_DOWN, *(a.format(**paths) for a in argv)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == code, done.stderr
+    assert "torn down" not in done.stdout
+    if code:
+        assert len(done.stderr.strip().splitlines()) == 1
+        assert not out.exists()
+    else:
+        rows = int(done.stdout.split(": ")[1].split()[0])  # "out.csv: 1200 rows, ..."
+        assert len(pd.read_csv(out)) == rows > 1000
+        assert json.loads(out.with_suffix(".meta.json").read_text())["clock"]["ticks"] == rows
+
+
 class _Terminal(io.StringIO):
     def isatty(self) -> bool:
         return True

@@ -11,6 +11,8 @@ scipy, pandas and numba made them 0.7-1.8 s).
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import importlib
 import logging
 import os
@@ -186,8 +188,35 @@ def cli(verbose: int, quiet: bool, debug: bool) -> None:  # noqa: ARG001 (read i
 THREAD_POOLS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS")
 
 
+#: The exit code of a run of the console command (:func:`main`), for :func:`_exit_now`; empty
+#: in a run that is not one (the tests' ``CliRunner``, a library caller).
+_EXIT_CODE: list[int] = []
+
+
+def _exit_now() -> None:
+    """Registered by :func:`main` before anything else it runs, so the last exit handler: end
+    the process with the command's exit code once every other handler has run (the thread
+    pools joined, a batch's workers stopped, dask's cluster closed), without the interpreter
+    tearing its modules down object by object, which takes 0.12-0.2 s on numba's, numpy's and
+    pyarrow's (of 0.7-0.9 s for ``altfuse fuse`` on the sample log). The outputs are in place
+    by then: written to temporary files, renamed. As a signal's exit does
+    (:func:`_fail_signalled`)."""
+    if not _EXIT_CODE:
+        return
+    logging.shutdown()  # registered before this handler, so run after it: not at all
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):  # a closed pipe: nothing left to say
+            stream.flush()
+    os._exit(_EXIT_CODE[0])
+
+
 def main() -> None:
+    atexit.register(_exit_now)
     for name in THREAD_POOLS:  # before numpy is loaded: it sizes its pool then
         os.environ.setdefault(name, "1")
     raise_on_sigterm()
-    cli()
+    try:
+        cli()
+    except SystemExit as exc:
+        _EXIT_CODE.append(exc.code if isinstance(exc.code, int) else int(exc.code is not None))
+        raise
