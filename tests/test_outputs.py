@@ -23,7 +23,7 @@ from altfuse import write
 from altfuse.batch import BatchOptions, run_batch
 from altfuse.cli import cli
 from altfuse.errors import ParameterError
-from altfuse.signals import Terminated, raise_on_sigterm
+from altfuse.signals import GRACE_S, Terminated, raise_on_sigterm
 from altfuse.write import TEMP_PREFIX, OutputError, atomic_outputs
 from conftest import SAMPLE_LOG
 from test_cli import assert_one_line_error, sha
@@ -200,6 +200,38 @@ def test_sigterm_to_the_command_is_one_line(tmp_path: Path) -> None:
     assert not out.exists() or list(out.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    ("signum", "said"), [(signal.SIGTERM, "terminated"), (signal.SIGINT, "interrupted")]
+)
+def test_a_signal_ends_a_first_run_while_it_compiles(
+    tmp_path: Path, signum: int, said: str
+) -> None:
+    """A first run compiles the loops (numba: LLVM's C++ for seconds at a time, in which
+    Python cannot run a signal's handler): SIGTERM or SIGINT there ended ``altfuse fuse`` only
+    when the compilation did, 18-25 s later. The watchdog ends it within GRACE_S, on one
+    line, with the signal's exit code and no output."""
+    out = tmp_path / "out"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))  # nothing compiled yet
+    with subprocess.Popen(
+        [sys.executable, "-m", "altfuse", "-v", "fuse", str(SAMPLE_LOG), "-o", str(out / "f.csv")],
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    ) as proc:
+        assert proc.stderr is not None
+        for line in proc.stderr:  # the smoother's loops are being compiled
+            if "compiling altfuse.fuse.smoother" in line:
+                break
+        sent = time.monotonic()
+        proc.send_signal(signum)
+        rest = proc.stderr.read()
+        proc.wait(timeout=60)
+    assert time.monotonic() - sent < GRACE_S + 5
+    assert proc.returncode == 128 + signum
+    assert rest.strip().splitlines()[-1] == f"altfuse: error: {said}"
+    assert not out.exists() or list(out.iterdir()) == []
+
+
 def copies(folder: Path, *names: str) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     for name in names:
@@ -290,10 +322,16 @@ def children(pid: int) -> set[int]:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
-def test_batch_workers_die_with_their_parent(tmp_path: Path) -> None:
+@pytest.mark.parametrize("cache", ["warm", "cold"])
+def test_batch_workers_die_with_their_parent(tmp_path: Path, cache: str) -> None:
+    """A killed batch leaves no worker running on, also where the workers compile the loops
+    (a first run: the signal waits for the compilation but for the watchdog, 20 s)."""
     logs = copies(tmp_path / "logs", *(f"{i}.bin" for i in range(8)))
     command = [sys.executable, "-m", "altfuse", "batch", str(logs), "-o", str(tmp_path / "out")]
-    proc = subprocess.Popen([*command, "--jobs", "2"], stderr=subprocess.DEVNULL)
+    env = dict(os.environ)
+    if cache == "cold":
+        env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba")
+    proc = subprocess.Popen([*command, "--jobs", "2"], stderr=subprocess.DEVNULL, env=env)
     deadline = time.monotonic() + 60
     workers: set[int] = set()
     while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:

@@ -34,7 +34,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, get_args
+from typing import TYPE_CHECKING, Any, Literal, NoReturn, get_args
 
 from threadpoolctl import threadpool_limits
 
@@ -44,7 +44,7 @@ from altfuse.io import sha256_of
 from altfuse.job import FileRun, Outputs, fuse_to_files
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
-from altfuse.signals import EXIT_TERMINATED, Terminated, interruption
+from altfuse.signals import EXIT_TERMINATED, Terminated, interruption, watch_signals
 from altfuse.write import (
     TableFormat,
     atomic_outputs,
@@ -304,15 +304,22 @@ def _worker_signal(_signum: int, _frame: object) -> None:
     os._exit(EXIT_TERMINATED)
 
 
+def _worker_end(_signum: int) -> NoReturn:
+    os._exit(EXIT_TERMINATED)
+
+
 def _worker_start(parent: int, started: Any) -> None:
     """In each worker process: SIGTERM ends it, removing the temporary files of the log in
-    hand, and on Linux the worker is sent SIGTERM when its parent dies (``PR_SET_PDEATHSIG``),
-    so that a killed batch does not leave workers writing on. ``started`` is the queue on
-    which it says which job it starts. Each worker computes on one thread (a BLAS pool forked
-    from a parent that loaded numpy would spin beside the other workers: see ``altfuse.cli``)."""
+    hand (or, where its exception cannot, the watchdog ends it after a grace:
+    :func:`altfuse.signals.watch_signals`), and on Linux the worker is sent SIGTERM when its
+    parent dies (``PR_SET_PDEATHSIG``), so that a killed batch does not leave workers writing
+    on. ``started`` is the queue on which it says which job it starts. Each worker computes on
+    one thread (a BLAS pool forked from a parent that loaded numpy would spin beside the other
+    workers: see ``altfuse.cli``)."""
     _worker.started = started
     threadpool_limits(1)
     signal.signal(signal.SIGTERM, _worker_signal)
+    watch_signals(_worker_end)
     if sys.platform.startswith("linux"):
         with contextlib.suppress(OSError, AttributeError):
             ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)

@@ -27,7 +27,14 @@ import click
 from altfuse import __version__
 from altfuse.errors import AltfuseError
 from altfuse.params import InvalidParameter
-from altfuse.signals import EXIT_TERMINATED, Terminated, interruption, raise_on_sigterm
+from altfuse.signals import (
+    ENDING,
+    EXIT_TERMINATED,
+    Terminated,
+    interruption,
+    raise_on_sigterm,
+    watch_signals,
+)
 
 EXIT_BUG = 3
 #: Every command's exit codes, at the end of its help (batch adds its own 4).
@@ -78,16 +85,23 @@ def _log_warning(
 
 
 def _fail_signalled(exc: BaseException | None) -> None:
-    """Exit as a signal asks (SIGTERM: 143, SIGINT: 130) when ``exc`` is one, at once: the
-    temporary files are gone (removed on the way here), and the interpreter's shutdown would
-    run the destructors of what the signal cut short (llvmlite's, in a compilation: "Exception
-    ignored in ObjectRef.__del__", a second stderr line)."""
-    if exc is None:
-        return
-    terminated = isinstance(exc, Terminated)
+    """Exit as a signal asks when ``exc`` is one (:func:`_end_signalled`)."""
+    if exc is not None:
+        _end_signalled(signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+
+
+def _end_signalled(signum: int) -> NoReturn:
+    """Exit as the signal ``signum`` asks (SIGTERM: 143, SIGINT: 130), at once, saying so on one
+    line: the temporary files are gone (removed on the way here, or never made where the
+    watchdog calls this: :func:`altfuse.signals.watch_signals`), and the interpreter's shutdown
+    would run the destructors of what the signal cut short (llvmlite's, in a compilation:
+    "Exception ignored in ObjectRef.__del__", a second stderr line)."""
+    ENDING.acquire()  # the handler's way out or the watchdog: one of them says it
+    terminated = signum == signal.SIGTERM
     click.echo(f"altfuse: error: {'terminated' if terminated else 'interrupted'}", err=True)
-    sys.stdout.flush()
-    sys.stderr.flush()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):  # a closed pipe: nothing left to say
+            stream.flush()
     os._exit(EXIT_TERMINATED if terminated else 128 + signal.SIGINT)
 
 
@@ -215,6 +229,7 @@ def main() -> None:
     for name in THREAD_POOLS:  # before numpy is loaded: it sizes its pool then
         os.environ.setdefault(name, "1")
     raise_on_sigterm()
+    watch_signals(_end_signalled)
     try:
         cli()
     except SystemExit as exc:
