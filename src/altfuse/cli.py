@@ -99,10 +99,15 @@ def _end_signalled(signum: int) -> NoReturn:
     ENDING.acquire()  # the handler's way out or the watchdog: one of them says it
     terminated = signum == signal.SIGTERM
     click.echo(f"altfuse: error: {'terminated' if terminated else 'interrupted'}", err=True)
+    _exit(EXIT_TERMINATED if terminated else 128 + signal.SIGINT)
+
+
+def _exit(code: int) -> NoReturn:
+    """End the process with ``code`` now (``os._exit``), its standard streams flushed."""
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):  # a closed pipe: nothing left to say
             stream.flush()
-    os._exit(EXIT_TERMINATED if terminated else 128 + signal.SIGINT)
+    os._exit(code)
 
 
 class _Cli(click.Group):
@@ -210,18 +215,15 @@ _EXIT_CODE: list[int] = []
 def _exit_now() -> None:
     """Registered by :func:`main` before anything else it runs, so the last exit handler: end
     the process with the command's exit code once every other handler has run (the thread
-    pools joined, a batch's workers stopped, dask's cluster closed), without the interpreter
+    pools joined, a batch's workers stopped, dask's client closed), without the interpreter
     tearing its modules down object by object, which takes 0.12-0.2 s on numba's, numpy's and
     pyarrow's (of 0.7-0.9 s for ``altfuse fuse`` on the sample log). The outputs are in place
     by then: written to temporary files, renamed. As a signal's exit does
-    (:func:`_fail_signalled`)."""
+    (:func:`_end_signalled`)."""
     if not _EXIT_CODE:
         return
     logging.shutdown()  # registered before this handler, so run after it: not at all
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):  # a closed pipe: nothing left to say
-            stream.flush()
-    os._exit(_EXIT_CODE[0])
+    _exit(_EXIT_CODE[0])
 
 
 def main() -> None:
