@@ -5,13 +5,17 @@ likewise."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import shutil
 import signal
+import stat
 import subprocess
 import sys
+import threading
 import time
+from io import StringIO
 from pathlib import Path
 
 import pandas as pd
@@ -37,6 +41,61 @@ def run(*args: str | Path) -> Result:
 
 def temporaries(folder: Path) -> list[Path]:
     return sorted(folder.rglob(f"{TEMP_PREFIX}*"))
+
+
+def test_a_named_pipe_is_written_into_not_replaced(tmp_path: Path) -> None:
+    """An output that exists and is no regular file (a named pipe here; ``/dev/null``,
+    ``/dev/stdout`` on a pipe) is written into, as standard output is: never renamed onto (a
+    run with ``-o /dev/null --force`` made /dev/null a regular file and wrote
+    /dev/null.meta.json), no sidecar beside it, no --force asked for."""
+    fifo = tmp_path / "table.csv"
+    os.mkfifo(fifo)
+    received: list[bytes] = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()), daemon=True)
+    reader.start()  # blocks until the run opens the pipe
+    try:
+        result = run("fuse", SAMPLE_LOG, "-o", fifo)
+    finally:  # a run that never opened it: the reader sees an empty pipe
+        with contextlib.suppress(OSError):
+            os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        reader.join(timeout=30)
+    assert result.exit_code == 0, result.output
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    assert len(pd.read_csv(StringIO(received[0].decode()))) == 1200
+    assert "without its provenance" in result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv"]
+
+
+def test_a_device_is_written_into_not_replaced(tmp_path: Path) -> None:
+    """As a named pipe (above): a null device of the test's own (mknod: as root, as CI runs;
+    never the system's /dev/null, which a failing run would replace)."""
+    device = tmp_path / "null"
+    try:
+        os.mknod(device, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
+    except PermissionError:
+        pytest.skip("mknod needs root")
+    result = run("fuse", SAMPLE_LOG, "-o", device, "--weights", device)
+    assert result.exit_code == 0, result.output
+    assert stat.S_ISCHR(os.lstat(device).st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["null"]
+
+
+def test_a_linked_output_stays_a_link(tmp_path: Path) -> None:
+    """An output path that is a symbolic link is written through: the link stays, its file
+    gets the table (a rename onto the link replaced it: ``-o /dev/stdout --force`` with
+    standard output in a file would have made /dev/stdout a regular file)."""
+    real = tmp_path / "runs" / "42.csv"
+    real.parent.mkdir()
+    real.write_text("old\n")
+    link = tmp_path / "latest.csv"
+    link.symlink_to(real)
+    result = run("fuse", SAMPLE_LOG, "-o", link, "--force")
+    assert result.exit_code == 0, result.output
+    assert link.is_symlink()
+    assert link.resolve() == real
+    assert len(pd.read_csv(real)) == 1200
+    assert real.with_suffix(".meta.json").is_file()  # beside the file it describes
+    assert temporaries(tmp_path) == []
 
 
 @pytest.mark.parametrize("flag", ["-o", "--csv"])

@@ -44,6 +44,7 @@ from altfuse.write import (
     TableFormat,
     atomic_outputs,
     check_paths,
+    is_stream,
     refuse_existing,
     write_json,
 )
@@ -302,11 +303,12 @@ def fuse(
     opts = FuseOptions(method=method, params=params, **options)
     outputs = Outputs(output, meta_path, weights_path, plot_path)
     outputs.refuse(log, force)
+    streamed = output == STDOUT or is_stream(output)  # the table written into a stream
     if outputs.meta_path is None:
         logging.getLogger("altfuse").warning(
-            "%s: the table goes to standard output, without its provenance (--meta names a file)",
-            log.name,
-        )
+            "%s: the table goes to %s, without its provenance (--meta names a file)",
+            log.name, "standard output" if output == STDOUT else output,
+        )  # fmt: skip
     with _progress_line():
         done = fuse_to_files(log, outputs, opts)
     run = done.run
@@ -332,7 +334,7 @@ def fuse(
         f"method {method}, sensors {', '.join(run.referred.names)}; "
         + ", ".join(f"{k} {v}" for k, v in counts.items())
         + f" (provenance: {sidecar})",
-        err=output == STDOUT,  # the table itself is on standard output
+        err=streamed,  # the table itself may be on standard output (-, /dev/stdout)
     )
 
 

@@ -4,7 +4,10 @@ Every file is written to a temporary file beside its target and renamed into pla
 of them are complete, all or none, so a failure never leaves a half-written output or an output
 without its sidecar behind; no output may be an input of the run or another of its outputs
 (:func:`check_paths`); SIGTERM, like SIGINT, removes the temporary files
-(:class:`altfuse.signals.Terminated`).
+(:class:`altfuse.signals.Terminated`). A target that is a symbolic link stays one: its file is
+written. A target that exists and is no regular file (``/dev/null``, a named pipe,
+``/dev/stdout``: :func:`is_stream`) is written into once the files are in place, as standard
+output is (``-o -``), never replaced (a rename onto ``/dev/null`` made it a regular file).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ import glob
 import json
 import os
 import socket
+import stat
 import sys
 import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -234,8 +238,25 @@ STDOUT = Path("-")
 
 
 def default_meta_path(csv_path: Path) -> Path | None:
-    """``out.csv`` -> ``out.meta.json``; none beside standard output."""
-    return None if csv_path == STDOUT else csv_path.with_suffix(".meta.json")
+    """``out.csv`` -> ``out.meta.json``, beside the file a link names (no
+    ``/dev/stdout.meta.json``); none beside standard output or another stream
+    (:func:`is_stream`: no ``/dev/null.meta.json``)."""
+    if csv_path == STDOUT or is_stream(csv_path):
+        return None
+    if os.path.islink(csv_path):
+        csv_path = Path(os.path.realpath(csv_path))
+    return csv_path.with_suffix(".meta.json")
+
+
+def is_stream(path: Path) -> bool:
+    """Whether ``path`` exists and is no regular file or directory, as it resolves: a device
+    (``/dev/null``; ``/dev/stdout`` on a terminal), a named pipe (``/dev/stdout`` on a pipe).
+    Such a target is written into, never replaced (:func:`atomic_outputs`)."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 Writer = Callable[[IO[Any]], None]
@@ -301,7 +322,7 @@ def check_paths(outputs: Sequence[Path | None], inputs: Sequence[Path] = ()) -> 
             if real == os.path.realpath(source) or _same_file(target, source):
                 same = "" if str(target) == str(source) else f" ({source})"
                 raise ParameterError(f"{target} is the input log{same}; choose another output path")
-        if real in seen:
+        if real in seen and not is_stream(target):  # a device takes every output given it
             raise ParameterError(
                 f"{seen[real]} and {target} are the same file; give each output its own path"
             )
@@ -322,11 +343,18 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
     """Collect writes into temporary files; on success rename them all into place, or, if one
     rename fails, none (the files they replace are put back). ``stage(target, write,
     binary=False)`` hands ``write`` an open text (or binary) file. Files get the user's umask;
-    an ``OSError`` becomes an :class:`OutputError` naming the path."""
+    an ``OSError`` becomes an :class:`OutputError` naming the path. A target that is a link is
+    written through it (the link stays); one that is a stream (:func:`is_stream`) is written
+    into once the others are in place."""
     staged: list[tuple[str, Path]] = []
+    streams: list[tuple[Path, Writer, bool]] = []
     mode = 0o666 & ~_umask()
 
     def stage(target: Path, write: Writer, binary: bool = False) -> None:
+        if is_stream(target):
+            streams.append((target, write, binary))
+            return
+        target = Path(os.path.realpath(target))  # a rename onto a link would replace the link
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
             remove_stale_temporaries(target.parent, glob.escape(target.name))
@@ -337,12 +365,7 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
         staged.append((tmp, target))
         try:
             os.fchmod(fd, mode)
-            if binary:
-                with os.fdopen(fd, "wb") as raw:
-                    write(raw)
-            else:
-                with os.fdopen(fd, "w", newline="", encoding="utf-8") as text:
-                    write(text)
+            _write_into(fd, write, binary)
         except OSError as exc:
             raise _cannot(target, exc) from exc
 
@@ -354,6 +377,21 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
         raise
+    for target, write, binary in streams:
+        try:
+            _write_into(target, write, binary)
+        except OSError as exc:
+            raise _cannot(target, exc) from exc
+
+
+def _write_into(file: int | Path, write: Writer, binary: bool) -> None:
+    """``write`` into ``file`` (a descriptor, closed after, or a path), as bytes or UTF-8 text."""
+    if binary:
+        with open(file, "wb") as raw:
+            write(raw)
+    else:
+        with open(file, "w", newline="", encoding="utf-8") as text:
+            write(text)
 
 
 def _commit(staged: Sequence[tuple[str, Path]]) -> None:
@@ -399,9 +437,10 @@ def _undo(done: Sequence[tuple[str, Path, str | None]]) -> None:
 
 
 def refuse_existing(force: bool, *paths: Path | None) -> None:
-    """An existing output is never overwritten without ``force`` (``--force``)."""
+    """An existing output is never overwritten without ``force`` (``--force``); a stream
+    (:func:`is_stream`) is written into, not overwritten."""
     for path in paths:
-        if not force and path is not None and os.path.lexists(path):
+        if not force and path is not None and os.path.lexists(path) and not is_stream(path):
             raise ParameterError(f"{path} exists; --force overwrites it")
 
 
