@@ -304,6 +304,38 @@ def test_a_failed_log_exits_4_and_a_refused_one_does_not(tmp_path: Path) -> None
     assert "2 logs, ok 1, refused 0, skipped 0, failed 1" in result.stdout
 
 
+def test_a_log_that_runs_out_of_memory_fails_saying_so(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Memory is the machine's limit, not a bug: the command says "out of memory" and what
+    needs less on one line, exit 1 (it said "internal error ... rerun with --debug", exit 3),
+    and a batch's row says the same (a 7.4-hour log at --rate 100 under a 1.5 GB limit)."""
+    from altfuse import batch as batch_module
+    from altfuse import commands
+
+    def short(*_args: object, **_kwargs: object) -> object:
+        raise MemoryError("Unable to allocate 118. MiB for an array")
+
+    monkeypatch.setattr(commands, "fuse_to_files", short)
+    monkeypatch.setattr(batch_module, "fuse_to_files", short)
+    result = CliRunner().invoke(
+        cli, ["fuse", str(SAMPLES / "mission.bin"), "-o", str(tmp_path / "f.csv")]
+    )
+    assert result.exit_code == 1
+    assert result.stderr.strip().splitlines() == [
+        "altfuse: error: out of memory (Unable to allocate 118. MiB for an array); a lower "
+        "--rate, or fewer --jobs at once, needs less"
+    ]
+    assert not (tmp_path / "f.csv").exists()
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    shutil.copy(SAMPLES / "mission.bin", logs / "long.bin")
+    run_batch([logs], tmp_path / "out", jobs=1)
+    row = pd.read_csv(tmp_path / "out" / "summary.csv").iloc[0]
+    assert row.status == "failed"
+    assert row.error.startswith("out of memory (Unable to allocate")
+
+
 def test_the_shards_of_a_job_array_cover_every_log_once(tmp_path: Path) -> None:
     """Issue 17: --shard 1/2 and 2/2 side by side in one folder (their shared lock refuses a
     whole batch meanwhile), each with its summary; the two summaries hold every log once."""

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any, Literal, NoReturn, get_args
 from threadpoolctl import threadpool_limits
 
 from altfuse import __version__
-from altfuse.errors import AltfuseError, LogReadError, ParameterError, Refusal
+from altfuse.errors import AltfuseError, LogReadError, ParameterError, Refusal, out_of_memory
 from altfuse.io import sha256_of
 from altfuse.job import FileRun, Outputs, fuse_to_files
 from altfuse.params import InvalidParameter
@@ -277,6 +277,10 @@ def process(job: Job, options: BatchOptions) -> LogResult:
                          firmware=exc.firmware)  # fmt: skip
     except AltfuseError as exc:
         return LogResult(name, "failed", str(exc), processing_s=time.perf_counter() - started)
+    except MemoryError as exc:
+        return LogResult(
+            name, "failed", out_of_memory(exc), processing_s=time.perf_counter() - started
+        )
     except Exception as exc:  # a bug must not stop the batch either; the row names it
         signalled = interruption(exc)
         if signalled is not None:  # a signal inside compiled code: still a signal

@@ -25,7 +25,7 @@ from typing import Any, NoReturn
 import click
 
 from altfuse import __version__
-from altfuse.errors import AltfuseError
+from altfuse.errors import AltfuseError, out_of_memory
 from altfuse.params import InvalidParameter
 from altfuse.signals import (
     ENDING,
@@ -40,8 +40,8 @@ EXIT_BUG = 3
 #: Every command's exit codes, at the end of its help (batch adds its own 4).
 EXIT_CODES = (
     "Exit codes: 0 done; 1 the log cannot be processed (missing, damaged beyond reading, too few "
-    "altitude sources) or an output cannot be written; 2 a usage or parameter error; 3 a bug "
-    "(--debug shows it); 130 interrupted, 143 terminated."
+    "altitude sources), an output cannot be written or memory runs out; 2 a usage or parameter "
+    "error; 3 a bug (--debug shows it); 130 interrupted, 143 terminated."
 )
 #: The group's options, taken after the command too (``altfuse fuse in.bin -o x.csv -v``).
 GLOBAL_FLAGS = frozenset({"-v", "-vv", "-vvv", "--verbose", "-q", "--quiet", "--debug"})
@@ -152,6 +152,8 @@ class _Cli(click.Group):
             _fail(f"{flag_for(exc.name)} {exc.problem}", exc.exit_code)
         except AltfuseError as exc:
             _fail(str(exc), exc.exit_code)
+        except MemoryError as exc:
+            _fail(out_of_memory(exc), 1)
         except Exception as exc:
             _fail_signalled(interruption(exc))
             if debug:
