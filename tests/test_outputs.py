@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import io
+import json
 import os
 import shutil
 import signal
@@ -15,7 +17,6 @@ import subprocess
 import sys
 import threading
 import time
-from io import StringIO
 from pathlib import Path
 
 import pandas as pd
@@ -43,6 +44,46 @@ def temporaries(folder: Path) -> list[Path]:
     return sorted(folder.rglob(f"{TEMP_PREFIX}*"))
 
 
+def test_a_compressed_name_is_written_compressed(tmp_path: Path) -> None:
+    """An output named ``.gz``, ``.bz2`` or ``.xz`` is written so (a ``flight.csv.gz`` was
+    plain CSV, which pandas, reading it as gzip by its name, refused): the same table read
+    back, the gzip bytes the same run to run."""
+    import bz2
+    import lzma
+
+    plain = run("fuse", SAMPLE_LOG, "-o", tmp_path / "plain.csv")
+    assert plain.exit_code == 0
+    for name in ("a", "b"):
+        result = run(
+            "fuse", SAMPLE_LOG, "-o", tmp_path / f"{name}.csv.gz",
+            "--weights", tmp_path / f"{name}.w.csv.bz2", "--meta", tmp_path / f"{name}.json.xz",
+        )  # fmt: skip
+        assert result.exit_code == 0, result.output
+    assert (tmp_path / "a.csv.gz").read_bytes() == (tmp_path / "b.csv.gz").read_bytes()
+    assert (tmp_path / "a.csv.gz").read_bytes()[:2] == b"\x1f\x8b"
+    assert pd.read_csv(tmp_path / "a.csv.gz").equals(pd.read_csv(tmp_path / "plain.csv"))
+    assert (
+        len(pd.read_csv(io.BytesIO(bz2.decompress((tmp_path / "a.w.csv.bz2").read_bytes()))))
+        == 1200
+    )
+    meta = json.loads(lzma.decompress((tmp_path / "a.json.xz").read_bytes()))
+    assert meta["outputs"]["csv"] == "a.csv.gz"
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [(["-o", "x.parquet.gz"], "Parquet is compressed already"),
+     (["-o", "x.csv.zst"], "a .zst file is not written"),
+     (["-o", "y.csv", "--meta", "y.json.zip"], "a .zip file is not written")],
+)  # fmt: skip
+def test_a_compression_not_written_is_refused(
+    tmp_path: Path, args: list[str], fragment: str
+) -> None:
+    paths = [str(tmp_path / a) if "." in a else a for a in args]
+    assert_one_line_error(run("fuse", SAMPLE_LOG, *paths), 2, fragment)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_named_pipe_is_written_into_not_replaced(tmp_path: Path) -> None:
     """An output that exists and is no regular file (a named pipe here; ``/dev/null``,
     ``/dev/stdout`` on a pipe) is written into, as standard output is: never renamed onto (a
@@ -61,7 +102,7 @@ def test_a_named_pipe_is_written_into_not_replaced(tmp_path: Path) -> None:
         reader.join(timeout=30)
     assert result.exit_code == 0, result.output
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
-    assert len(pd.read_csv(StringIO(received[0].decode()))) == 1200
+    assert len(pd.read_csv(io.StringIO(received[0].decode()))) == 1200
     assert "without its provenance" in result.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["table.csv"]
 

@@ -257,8 +257,9 @@ def _plot_option(command: Callable[..., Any]) -> Callable[..., Any]:
 @click.command(cls=_MethodCommand, choose="one")
 @_LOG_ARG
 @_output_option(
-    "The fused table to write: CSV, or Parquet for a .parquet name; the provenance goes beside "
-    "it as NAME.meta.json. '-': the CSV to standard output."
+    "The fused table to write: CSV, or Parquet for a .parquet name (a CSV named .gz, .bz2 or "
+    ".xz: compressed so); the provenance goes beside it as NAME.meta.json. '-': the CSV to "
+    "standard output."
 )
 @_pipeline_options
 @click.option(

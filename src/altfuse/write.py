@@ -12,10 +12,14 @@ output is (``-o -``), never replaced (a rename onto ``/dev/null`` made it a regu
 
 from __future__ import annotations
 
+import bz2
 import contextlib
 import errno
 import glob
+import gzip
+import io
 import json
+import lzma
 import os
 import socket
 import stat
@@ -23,7 +27,7 @@ import sys
 import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any, Literal
+from typing import IO, TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -328,7 +332,20 @@ def check_paths(outputs: Sequence[Path | None], inputs: Sequence[Path] = ()) -> 
             )
         if os.path.isdir(target):
             raise ParameterError(f"{target} is a directory; an output must be a file path")
+        _check_compression(target)
         seen[real] = target
+
+
+def _check_compression(target: Path) -> None:
+    """Refuse a name that asks for a compression altfuse does not write (:data:`COMPRESSIONS`),
+    or for one of Parquet, which is compressed already."""
+    last = target.suffix.lower()
+    if last in _UNWRITTEN:
+        raise ParameterError(
+            f"{target}: a {last} file is not written; {', '.join(COMPRESSIONS)} compress an output"
+        )
+    if last in COMPRESSIONS and Path(target.stem).suffix.lower() == ".parquet":
+        raise ParameterError(f"{target}: Parquet is compressed already; name it {target.stem}")
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -365,7 +382,7 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
         staged.append((tmp, target))
         try:
             os.fchmod(fd, mode)
-            _write_into(fd, write, binary)
+            _write_into(fd, write, binary, target.suffix)
         except OSError as exc:
             raise _cannot(target, exc) from exc
 
@@ -379,19 +396,36 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
         raise
     for target, write, binary in streams:
         try:
-            _write_into(target, write, binary)
+            _write_into(target, write, binary, target.suffix)
         except OSError as exc:
             raise _cannot(target, exc) from exc
 
 
-def _write_into(file: int | Path, write: Writer, binary: bool) -> None:
-    """``write`` into ``file`` (a descriptor, closed after, or a path), as bytes or UTF-8 text."""
-    if binary:
-        with open(file, "wb") as raw:
-            write(raw)
-    else:
-        with open(file, "w", newline="", encoding="utf-8") as text:
-            write(text)
+#: Outputs compressed by their name's last suffix, as pandas reads a table back (``read_csv``
+#: infers it from the name): the standard library's streams, byte-stable (gzip's header holds
+#: no time and no name). A table named ``flight.csv.gz`` was plain CSV under a name that every
+#: reader takes for gzip. Names that ask for another compression are refused
+#: (:func:`check_paths`).
+COMPRESSIONS: dict[str, Callable[[IO[bytes]], io.BufferedIOBase]] = {  # each closed by its user
+    ".gz": lambda raw: gzip.GzipFile(filename="", mode="wb", compresslevel=6, fileobj=raw, mtime=0),
+    ".bz2": lambda raw: bz2.BZ2File(raw, "wb"),
+    ".xz": lambda raw: lzma.LZMAFile(raw, "wb"),  # noqa: SIM115
+}
+_UNWRITTEN = (".zip", ".zst", ".tar", ".tgz", ".lz4", ".7z")
+
+
+def _write_into(file: int | Path, write: Writer, binary: bool, suffix: str = "") -> None:
+    """``write`` into ``file`` (a descriptor, closed after, or a path), as bytes or UTF-8 text,
+    compressed as ``suffix`` (the target's) asks (:data:`COMPRESSIONS`)."""
+    with open(file, "wb") as raw, contextlib.ExitStack() as layers:
+        out: IO[Any] | io.IOBase = raw
+        if suffix.lower() in COMPRESSIONS:
+            out = layers.enter_context(COMPRESSIONS[suffix.lower()](raw))
+        if not binary:
+            out = layers.enter_context(
+                io.TextIOWrapper(cast(IO[bytes], out), encoding="utf-8", newline="")
+            )
+        write(cast(IO[Any], out))
 
 
 def _commit(staged: Sequence[tuple[str, Path]]) -> None:
