@@ -336,6 +336,21 @@ def test_a_log_that_runs_out_of_memory_fails_saying_so(
     assert row.error.startswith("out of memory (Unable to allocate")
 
 
+def test_a_batch_takes_compressed_logs_by_their_names(tmp_path: Path) -> None:
+    """``flight.bin.gz`` (and ``.bz2``, ``.xz``; ``.ulg`` too) is found and fused, its outputs
+    named as the log's (``flight.csv``), and skipped when complete on a rerun."""
+    import gzip
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "flight.BIN.gz").write_bytes(gzip.compress((SAMPLES / "mission.bin").read_bytes()))
+    results = run_batch([logs], tmp_path / "out", jobs=1)
+    assert [r.status for r in results] == ["ok"]
+    assert (tmp_path / "out" / "flight.csv").is_file()
+    again = run_batch([logs], tmp_path / "out", BatchOptions(skip_existing=True), jobs=1)
+    assert [r.status for r in again] == ["skipped"]
+
+
 def test_the_shards_of_a_job_array_cover_every_log_once(tmp_path: Path) -> None:
     """Issue 17: --shard 1/2 and 2/2 side by side in one folder (their shared lock refuses a
     whole batch meanwhile), each with its summary; the two summaries hold every log once."""

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import bz2
+import gzip
+import hashlib
+import lzma
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -182,6 +187,41 @@ def test_not_a_log(tmp_path: Path, content: bytes, message: str) -> None:
     path.write_bytes(content)
     with pytest.raises(LogReadError, match=message):
         read_log(path)
+
+
+@pytest.mark.parametrize(("suffix", "pack"), [(".gz", gzip.compress), (".bz2", bz2.compress),
+                                               (".xz", lzma.compress)])  # fmt: skip
+def test_a_compressed_log_reads_as_the_log_it_holds(
+    tmp_path: Path, suffix: str, pack: Callable[[bytes], bytes]
+) -> None:
+    """Fleets keep logs compressed (``flight.bin.gz``): read as the log within (its heights
+    the same to the bit), described as the file given (its name, size and sha256), noted."""
+    packed = tmp_path / f"mission.bin{suffix}"
+    packed.write_bytes(pack(SAMPLE_LOG.read_bytes()))
+    plain, flight = read_log(SAMPLE_LOG), read_log(packed)
+    for a, b in zip(plain.sensors, flight.sensors, strict=True):
+        assert a.name == b.name
+        np.testing.assert_array_equal(a.value, b.value)
+        np.testing.assert_array_equal(a.t, b.t)
+    assert flight.path == str(packed)
+    assert flight.size_bytes == packed.stat().st_size
+    assert flight.sha256 == hashlib.sha256(packed.read_bytes()).hexdigest()
+    assert any("compression" in note for note in flight.notes)
+
+
+def test_a_compressed_log_cut_short_is_read_up_to_the_cut(tmp_path: Path) -> None:
+    """As a log cut short is (its last whole record), with the damage said; a stream that
+    gives nothing is not a log."""
+    whole = gzip.compress(SAMPLE_LOG.read_bytes())
+    cut = tmp_path / "cut.bin.gz"
+    cut.write_bytes(whole[: len(whole) // 3])
+    flight = read_log(cut)
+    assert 0 < flight.sensors[0].t.size < read_log(SAMPLE_LOG).sensors[0].t.size
+    assert any("gzip stream cut after" in line for line in flight.damaged)
+    bad = tmp_path / "bad.bin.gz"
+    bad.write_bytes(b"\x1f\x8b" + bytes(100))
+    with pytest.raises(LogReadError, match="cannot decompress its gzip"):
+        read_log(bad)
 
 
 def test_missing_file(tmp_path: Path) -> None:

@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import bz2
 import contextlib
+import gzip
 import hashlib
+import io
+import lzma
+import tempfile
 from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 from altfuse.errors import LogReadError
@@ -14,6 +20,12 @@ from altfuse.model import FlightLog
 
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 _SNIFF_BYTES = 4096
+#: Logs kept compressed, as fleets archive them (``flight.bin.gz``), known by their first
+#: bytes: gzip, bzip2, xz. Decompressed into a temporary file, read from it, and described as
+#: the file given (its name, size and sha256: the file a later ``--skip-existing`` hashes).
+COMPRESSIONS = {b"\x1f\x8b": "gzip", b"BZh": "bzip2", b"\xfd7zXZ\x00": "xz"}
+#: Their names' last suffixes, which a batch finds and strips from its outputs' names.
+COMPRESSED_SUFFIXES = (".gz", ".bz2", ".xz")
 
 
 def sha256_of(path: Path) -> str:
@@ -60,6 +72,9 @@ def read_log(path: str | Path) -> FlightLog:
         raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
     if not head:
         raise LogReadError(f"{path}: the file is empty")
+    for magic, kind in COMPRESSIONS.items():
+        if head.startswith(magic):
+            return _read_compressed(path, kind)
     if head.startswith(ULOG_MAGIC):
         from altfuse.io.ulog import read_ulog
 
@@ -71,3 +86,43 @@ def read_log(path: str | Path) -> FlightLog:
     from altfuse.io.dataflash import read_dataflash
 
     return read_dataflash(path)
+
+
+def _decompressing(path: Path, kind: str) -> io.BufferedIOBase:
+    """``path`` opened through its ``kind`` of compression (:data:`COMPRESSIONS`)."""
+    if kind == "gzip":
+        return gzip.GzipFile(path, "rb")
+    if kind == "bzip2":
+        return bz2.BZ2File(path, "rb")
+    return lzma.LZMAFile(path, "rb")
+
+
+def _read_compressed(path: Path, kind: str) -> FlightLog:
+    """The log compressed in ``path`` (``kind``: gzip, bzip2, xz), decompressed into a
+    temporary file and read from it; described as ``path``. A stream that ends early or goes
+    bad is read as far as it decompresses (as a log cut short is), with a note; one that gives
+    nothing is not a log."""
+    with tempfile.TemporaryDirectory(prefix="altfuse-") as folder:
+        plain = Path(folder) / path.with_suffix("").name
+        cut = ""
+        try:
+            with _decompressing(path, kind) as stream, plain.open("wb") as out:
+                try:  # a buffered read loses what it holds when the stream breaks: read1's don't
+                    while chunk := stream.read1(1 << 20):
+                        out.write(chunk)
+                except (EOFError, OSError, lzma.LZMAError, ValueError) as exc:
+                    if out.tell() == 0:
+                        raise LogReadError(f"{path}: cannot decompress its {kind} ({exc})") from exc
+                    cut = f"{kind} stream cut after {out.tell()} bytes ({exc}): read up to there"
+        except OSError as exc:
+            raise LogReadError(f"{path}: cannot decompress ({exc.strerror or exc})") from exc
+        flight = read_log(plain)
+    notes = (*flight.notes, f"read from its {kind} compression", *((cut,) if cut else ()))
+    return replace(
+        flight,
+        path=str(path),
+        sha256=sha256_of(path),
+        size_bytes=path.stat().st_size,
+        notes=notes,
+        damaged=(*flight.damaged, cut) if cut else flight.damaged,
+    )
