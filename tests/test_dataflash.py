@@ -5,7 +5,12 @@ from __future__ import annotations
 import bz2
 import gzip
 import hashlib
+import io
 import lzma
+import os
+import re
+import sys
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -217,11 +222,41 @@ def test_a_compressed_log_cut_short_is_read_up_to_the_cut(tmp_path: Path) -> Non
     cut.write_bytes(whole[: len(whole) // 3])
     flight = read_log(cut)
     assert 0 < flight.sensors[0].t.size < read_log(SAMPLE_LOG).sensors[0].t.size
-    assert any("gzip stream cut after" in line for line in flight.damaged)
+    assert any("its gzip compression cut after" in line for line in flight.damaged)
     bad = tmp_path / "bad.bin.gz"
     bad.write_bytes(b"\x1f\x8b" + bytes(100))
-    with pytest.raises(LogReadError, match="cannot decompress its gzip"):
+    with pytest.raises(LogReadError, match="cannot read its gzip compression"):
         read_log(bad)
+
+
+def test_a_piped_log_reads_as_the_log_it_carries(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A log that flows in (``altfuse fuse - < x``, ``<(zcat x.gz)``, a named pipe; "not a
+    file" before) is copied and read: its heights bit for bit, its size and sha256 the bytes
+    that came; errors name the path given, never the copy."""
+    data = SAMPLE_LOG.read_bytes()
+    plain = read_log(SAMPLE_LOG)
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    writer = threading.Thread(target=fifo.write_bytes, args=(gzip.compress(data),), daemon=True)
+    writer.start()
+    piped = read_log(fifo)
+    writer.join(timeout=30)
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(data)))
+    stdin = read_log("-")
+    for flight in (piped, stdin):
+        np.testing.assert_array_equal(flight.sensors[0].value, plain.sensors[0].value)
+    assert stdin.path == "-"
+    assert (stdin.sha256, stdin.size_bytes) == (hashlib.sha256(data).hexdigest(), len(data))
+    assert piped.path == str(fifo)
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(b"")))
+    with pytest.raises(LogReadError, match=r"^-: nothing came from standard input$"):
+        read_log("-")
+    packed = tmp_path / "text.bin.gz"
+    packed.write_bytes(gzip.compress(b"not a log"))
+    with pytest.raises(LogReadError, match=f"^{re.escape(str(packed))}: not a DataFlash log"):
+        read_log(packed)
 
 
 def test_missing_file(tmp_path: Path) -> None:

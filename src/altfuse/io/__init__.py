@@ -8,13 +8,16 @@ import gzip
 import hashlib
 import io
 import lzma
+import stat
+import sys
 import tempfile
 from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
+from typing import cast
 
-from altfuse.errors import LogReadError
+from altfuse.errors import AltfuseError, LogReadError
 from altfuse.io.framing import FMT_HEADER
 from altfuse.model import FlightLog
 
@@ -57,21 +60,9 @@ def read_log(path: str | Path) -> FlightLog:
         The file is missing, empty, unreadable, or not a format altfuse reads.
     """
     path = Path(path)
-    if not path.exists():
-        raise LogReadError(f"{path}: no such file")
-    if path.is_dir():
-        raise LogReadError(
-            f"{path}: a folder, not a log; for its logs: altfuse batch {path} -o OUT"
-        )
-    if not path.is_file():
-        raise LogReadError(f"{path}: not a file")
-    try:
-        with path.open("rb") as handle:
-            head = handle.read(_SNIFF_BYTES)
-    except OSError as exc:
-        raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
-    if not head:
-        raise LogReadError(f"{path}: the file is empty")
+    if _piped(path):
+        return _read_piped(path)
+    head = _head(path)
     for magic, kind in COMPRESSIONS.items():
         if head.startswith(magic):
             return _read_compressed(path, kind)
@@ -88,6 +79,38 @@ def read_log(path: str | Path) -> FlightLog:
     return read_dataflash(path)
 
 
+def _piped(path: Path) -> bool:
+    """Whether the log flows through ``path`` rather than lying in it: ``-`` (standard input),
+    a named pipe, a character device (``/dev/stdin`` on a terminal)."""
+    if str(path) == "-":
+        return True
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return False
+    return stat.S_ISFIFO(mode) or stat.S_ISCHR(mode)
+
+
+def _head(path: Path) -> bytes:
+    """The first bytes of the file at ``path``, by which :func:`read_log` picks its reader."""
+    if not path.exists():
+        raise LogReadError(f"{path}: no such file")
+    if path.is_dir():
+        raise LogReadError(
+            f"{path}: a folder, not a log; for its logs: altfuse batch {path} -o OUT"
+        )
+    if not path.is_file():
+        raise LogReadError(f"{path}: not a file")
+    try:
+        with path.open("rb") as handle:
+            head = handle.read(_SNIFF_BYTES)
+    except OSError as exc:
+        raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
+    if not head:
+        raise LogReadError(f"{path}: the file is empty")
+    return head
+
+
 def _decompressing(path: Path, kind: str) -> io.BufferedIOBase:
     """``path`` opened through its ``kind`` of compression (:data:`COMPRESSIONS`)."""
     if kind == "gzip":
@@ -98,31 +121,55 @@ def _decompressing(path: Path, kind: str) -> io.BufferedIOBase:
 
 
 def _read_compressed(path: Path, kind: str) -> FlightLog:
-    """The log compressed in ``path`` (``kind``: gzip, bzip2, xz), decompressed into a
-    temporary file and read from it; described as ``path``. A stream that ends early or goes
-    bad is read as far as it decompresses (as a log cut short is), with a note; one that gives
-    nothing is not a log."""
+    """The log compressed in ``path`` (``kind``: gzip, bzip2, xz), decompressed and read
+    (:func:`_read_copied`); described as the file given (its size and sha256)."""
+    try:
+        with _decompressing(path, kind) as stream:
+            flight = _read_copied(path, stream, f"its {kind} compression")
+    except OSError as exc:
+        raise LogReadError(f"{path}: cannot decompress ({exc.strerror or exc})") from exc
+    return replace(flight, sha256=sha256_of(path), size_bytes=path.stat().st_size)
+
+
+def _read_piped(path: Path) -> FlightLog:
+    """The log flowing through ``path`` (``-``: standard input; a named pipe, ``<(zcat x)``,
+    ``/dev/stdin``), copied and read (:func:`_read_copied`): its size and sha256 are the bytes
+    that came."""
+    if str(path) == "-":
+        return _read_copied(path, cast(io.BufferedReader, sys.stdin.buffer), "standard input")
+    try:
+        with path.open("rb") as stream:
+            return _read_copied(path, stream, "a pipe")
+    except OSError as exc:
+        raise LogReadError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+
+
+def _read_copied(path: Path, stream: io.BufferedIOBase, source: str) -> FlightLog:
+    """The log in ``stream`` (from ``source``: a compression, a pipe), copied into a temporary
+    file (the readers map a file) and read from it; its path ``path``, the copy noted. A stream
+    that ends early or goes bad is read as far as it came (as a log cut short is), the damage
+    said; one that gives nothing is not a log."""
     with tempfile.TemporaryDirectory(prefix="altfuse-") as folder:
-        plain = Path(folder) / path.with_suffix("").name
+        copy = Path(folder) / (path.with_suffix("").name or "log")
         cut = ""
+        with copy.open("wb") as out:
+            try:  # a buffered read loses what it holds when the stream breaks: read1's don't
+                while chunk := stream.read1(1 << 20):
+                    out.write(chunk)
+            except (EOFError, OSError, lzma.LZMAError, ValueError) as exc:
+                if out.tell() == 0:
+                    raise LogReadError(f"{path}: cannot read {source} ({exc})") from exc
+                cut = f"{source} cut after {out.tell()} bytes ({exc}): read up to there"
+            if out.tell() == 0:
+                raise LogReadError(f"{path}: nothing came from {source}")
         try:
-            with _decompressing(path, kind) as stream, plain.open("wb") as out:
-                try:  # a buffered read loses what it holds when the stream breaks: read1's don't
-                    while chunk := stream.read1(1 << 20):
-                        out.write(chunk)
-                except (EOFError, OSError, lzma.LZMAError, ValueError) as exc:
-                    if out.tell() == 0:
-                        raise LogReadError(f"{path}: cannot decompress its {kind} ({exc})") from exc
-                    cut = f"{kind} stream cut after {out.tell()} bytes ({exc}): read up to there"
-        except OSError as exc:
-            raise LogReadError(f"{path}: cannot decompress ({exc.strerror or exc})") from exc
-        flight = read_log(plain)
-    notes = (*flight.notes, f"read from its {kind} compression", *((cut,) if cut else ()))
+            flight = read_log(copy)
+        except AltfuseError as exc:  # said of the log given, not of its copy
+            exc.args = (str(exc).replace(str(copy), str(path)), *exc.args[1:])
+            raise
     return replace(
         flight,
         path=str(path),
-        sha256=sha256_of(path),
-        size_bytes=path.stat().st_size,
-        notes=notes,
+        notes=(*flight.notes, f"read from {source}", *((cut,) if cut else ())),
         damaged=(*flight.damaged, cut) if cut else flight.damaged,
     )
