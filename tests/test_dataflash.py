@@ -13,6 +13,7 @@ import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -257,6 +258,35 @@ def test_a_piped_log_reads_as_the_log_it_carries(
     packed.write_bytes(gzip.compress(b"not a log"))
     with pytest.raises(LogReadError, match=f"^{re.escape(str(packed))}: not a DataFlash log"):
         read_log(packed)
+
+
+class _Zeros(io.RawIOBase):
+    """An endless stream of zeros (``/dev/zero``), counting what is read of it (1 GB at most:
+    a reader that took it all would fill a disk)."""
+
+    def __init__(self) -> None:
+        self.given = 0
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer: Any) -> int:
+        size = min(len(buffer), 10**9 - self.given)
+        buffer[:size] = bytes(size)
+        self.given += size
+        return size
+
+
+def test_a_stream_that_is_no_log_is_refused_from_its_first_bytes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``altfuse fuse /dev/zero`` (or a pipe of junk) is refused as a file of junk is, from its
+    first bytes, without copying the rest: the copy would have filled the disk."""
+    zeros = _Zeros()
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BufferedReader(zeros)))
+    with pytest.raises(LogReadError, match=r"^-: not a DataFlash log"):
+        read_log("-")
+    assert zeros.given <= 4 << 20
 
 
 def test_missing_file(tmp_path: Path) -> None:

@@ -62,21 +62,31 @@ def read_log(path: str | Path) -> FlightLog:
     path = Path(path)
     if _piped(path):
         return _read_piped(path)
-    head = _head(path)
-    for magic, kind in COMPRESSIONS.items():
-        if head.startswith(magic):
-            return _read_compressed(path, kind)
-    if head.startswith(ULOG_MAGIC):
+    kind = _kind(path, _head(path))
+    if kind in COMPRESSIONS.values():
+        return _read_compressed(path, kind)
+    if kind == "ulog":
         from altfuse.io.ulog import read_ulog
 
         return read_ulog(path)
+    from altfuse.io.dataflash import read_dataflash
+
+    return read_dataflash(path)
+
+
+def _kind(path: Path, head: bytes) -> str:
+    """What a log whose first bytes are ``head`` is: one of COMPRESSIONS', ``ulog`` or
+    ``dataflash``; a LogReadError where it is none of them."""
+    for magic, kind in COMPRESSIONS.items():
+        if head.startswith(magic):
+            return kind
+    if head.startswith(ULOG_MAGIC):
+        return "ulog"
     if FMT_HEADER not in head:
         raise LogReadError(
             f"{path}: not a DataFlash log (no FMT record in its first bytes) nor a ULog"
         )
-    from altfuse.io.dataflash import read_dataflash
-
-    return read_dataflash(path)
+    return "dataflash"
 
 
 def _piped(path: Path) -> bool:
@@ -148,20 +158,26 @@ def _read_copied(path: Path, stream: io.BufferedIOBase, source: str) -> FlightLo
     """The log in ``stream`` (from ``source``: a compression, a pipe), copied into a temporary
     file (the readers map a file) and read from it; its path ``path``, the copy noted. A stream
     that ends early or goes bad is read as far as it came (as a log cut short is), the damage
-    said; one that gives nothing is not a log."""
+    said; one that gives nothing, or whose first bytes are no log's (``/dev/zero``), is not a
+    log, and is not copied on."""
     with tempfile.TemporaryDirectory(prefix="altfuse-") as folder:
         copy = Path(folder) / (path.with_suffix("").name or "log")
-        cut = ""
+        cut, head = "", b""
         with copy.open("wb") as out:
             try:  # a buffered read loses what it holds when the stream breaks: read1's don't
                 while chunk := stream.read1(1 << 20):
+                    if len(head) < _SNIFF_BYTES:
+                        head += chunk[: _SNIFF_BYTES - len(head)]
+                        if len(head) == _SNIFF_BYTES:
+                            _kind(path, head)  # no log's first bytes: the rest is not copied
                     out.write(chunk)
             except (EOFError, OSError, lzma.LZMAError, ValueError) as exc:
-                if out.tell() == 0:
+                if not head:
                     raise LogReadError(f"{path}: cannot read {source} ({exc})") from exc
                 cut = f"{source} cut after {out.tell()} bytes ({exc}): read up to there"
-            if out.tell() == 0:
-                raise LogReadError(f"{path}: nothing came from {source}")
+        if not head:
+            raise LogReadError(f"{path}: nothing came from {source}")
+        _kind(path, head)
         try:
             flight = read_log(copy)
         except AltfuseError as exc:  # said of the log given, not of its copy
