@@ -323,8 +323,8 @@ def test_a_log_that_runs_out_of_memory_fails_saying_so(
     )
     assert result.exit_code == 1
     assert result.stderr.strip().splitlines() == [
-        "altfuse: error: out of memory (Unable to allocate 118. MiB for an array); a lower "
-        "--rate, or fewer --jobs at once, needs less"
+        "altfuse: error: out of memory (Unable to allocate 118. MiB for an array); less at once "
+        "needs less: a lower --rate, fewer --jobs, a shorter --duration"
     ]
     assert not (tmp_path / "f.csv").exists()
     logs = tmp_path / "logs"

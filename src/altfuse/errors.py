@@ -36,7 +36,9 @@ class ParameterError(AltfuseError):
 def out_of_memory(exc: MemoryError) -> str:
     """What a run that ran out of memory says: not a bug (``internal error``, exit 3, as it
     said before), the machine's limit for this log and these options (``altfuse fuse`` of a
-    7.4-hour log at ``--rate 100``: 2.65 M ticks, 1.26 GB)."""
+    7.4-hour log at ``--rate 100``: 2.65 M ticks, 1.26 GB; ``simulate --duration 1e9``), and
+    the options that ask less of it."""
     return (
-        f"out of memory ({exc or 'no detail'}); a lower --rate, or fewer --jobs at once, needs less"
+        f"out of memory ({exc or 'no detail'}); less at once needs less: a lower --rate, fewer "
+        "--jobs, a shorter --duration"
     )
