@@ -40,7 +40,8 @@ from threadpoolctl import threadpool_limits
 
 from altfuse import __version__
 from altfuse.errors import AltfuseError, LogReadError, ParameterError, Refusal, out_of_memory
-from altfuse.io import COMPRESSED_SUFFIXES, sha256_of
+from altfuse.files import COMPRESSIONS, compression_named
+from altfuse.io import sha256_of
 from altfuse.job import FileRun, Outputs, fuse_to_files
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
@@ -57,11 +58,12 @@ if TYPE_CHECKING:
     import pandas as pd
 
 SUMMARY = "summary.csv"
-#: The logs a batch takes by default: DataFlash and ULog, whatever their case.
-#: The logs a batch finds in a folder (case aside): DataFlash and ULog, as they are or
-#: compressed (:data:`altfuse.io.COMPRESSIONS`).
+#: The logs a batch takes by default, whatever their case: DataFlash and ULog, as they are or
+#: compressed (:data:`altfuse.files.COMPRESSIONS`).
 LOG_PATTERNS = tuple(
-    f"*{log}{packed}" for log in (".bin", ".ulg") for packed in ("", *COMPRESSED_SUFFIXES)
+    f"*{log}{packed}"
+    for log in (".bin", ".ulg")
+    for packed in ("", *(c.suffix for c in COMPRESSIONS))
 )
 #: The summary as Parquet too, with ``--format parquet``.
 PARQUET_SUMMARY = "summary.parquet"
@@ -232,7 +234,7 @@ def plan(
     taken: dict[str, Path] = {}
     for log, relative in find_logs(paths, pattern):
         stem = relative.with_suffix("")
-        if relative.suffix.lower() in COMPRESSED_SUFFIXES:  # flight.bin.gz: flight.csv, ...
+        if compression_named(relative):  # flight.bin.gz: flight.csv, ...
             stem = stem.with_suffix("")
         key = str(stem).casefold()
         if key in taken:

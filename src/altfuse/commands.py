@@ -30,6 +30,7 @@ from altfuse.batch import (
 )
 from altfuse.evaluation import TRUTHS, Evaluation, TruthChoice, evaluation_table
 from altfuse.evaluation import evaluate as evaluate_log
+from altfuse.files import is_stream
 from altfuse.fuse import DEFAULT_METHOD, METHODS, params_by_method
 from altfuse.info import as_text, damage, describe
 from altfuse.io import read_log
@@ -44,7 +45,6 @@ from altfuse.write import (
     TableFormat,
     atomic_outputs,
     check_paths,
-    is_stream,
     refuse_existing,
     write_json,
 )

@@ -416,19 +416,18 @@ def _ground_before(
     is valid, the reference smoothed: :func:`_smoothed`), how it was found, and whether the
     vehicle stood there (empty, and why not, where it did not)."""
     t, ref_valid, smooth = clock
-    window = np.zeros(t.size, dtype=bool)
+    empty = np.zeros(t.size, dtype=bool)
     if takeoff is None:
-        return window, "first seconds of the log (no take-off found)", False
+        return empty, "first seconds of the log (no take-off found)", False
     if t[ref_valid][0] >= takeoff - TAKEOFF_MARGIN_S:
-        return window, "first seconds of the log (take-off too early for a ground window)", False
+        return empty, "first seconds of the log (take-off too early for a ground window)", False
     end = takeoff - TAKEOFF_MARGIN_S
     window = (t >= end - ground_s) & (t <= end)
     if not (window & ref_valid).any():
         return window, "first seconds of the log (no reference sample before take-off)", False
     if _moving(smooth, window & ref_valid, climb_m):
         # a log begun in flight: its first seconds are a climb, not a ground
-        window = np.zeros(t.size, dtype=bool)
-        return window, "first seconds of the log (moving before take-off was found)", False
+        return empty, "first seconds of the log (moving before take-off was found)", False
     return window, f"ground before take-off at {takeoff:.1f} s", True
 
 

@@ -6,23 +6,20 @@ without its sidecar behind; no output may be an input of the run or another of i
 (:func:`check_paths`); SIGTERM, like SIGINT, removes the temporary files
 (:class:`altfuse.signals.Terminated`). A target that is a symbolic link stays one: its file is
 written. A target that exists and is no regular file (``/dev/null``, a named pipe,
-``/dev/stdout``: :func:`is_stream`) is written into once the files are in place, as standard
-output is (``-o -``), never replaced (a rename onto ``/dev/null`` made it a regular file).
+``/dev/stdout``: :func:`altfuse.files.is_stream`) is written into once the files are in place,
+as standard output is (``-o -``), never replaced (a rename onto ``/dev/null`` made it a regular
+file).
 """
 
 from __future__ import annotations
 
-import bz2
 import contextlib
 import errno
 import glob
-import gzip
 import io
 import json
-import lzma
 import os
 import socket
-import stat
 import sys
 import tempfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -33,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from altfuse.errors import AltfuseError, ParameterError
+from altfuse.files import COMPRESSIONS, compression_named, is_stream
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -252,17 +250,6 @@ def default_meta_path(csv_path: Path) -> Path | None:
     return csv_path.with_suffix(".meta.json")
 
 
-def is_stream(path: Path) -> bool:
-    """Whether ``path`` exists and is no regular file or directory, as it resolves: a device
-    (``/dev/null``; ``/dev/stdout`` on a terminal), a named pipe (``/dev/stdout`` on a pipe).
-    Such a target is written into, never replaced (:func:`atomic_outputs`)."""
-    try:
-        mode = os.stat(path).st_mode
-    except (OSError, ValueError):
-        return False
-    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
-
-
 Writer = Callable[[IO[Any]], None]
 
 #: Every temporary file altfuse writes is named ``.altfuse-HOST-PID-NAME.XXXX.tmp`` beside its
@@ -337,14 +324,15 @@ def check_paths(outputs: Sequence[Path | None], inputs: Sequence[Path] = ()) -> 
 
 
 def _check_compression(target: Path) -> None:
-    """Refuse a name that asks for a compression altfuse does not write (:data:`COMPRESSIONS`),
+    """Refuse a name that asks for a compression altfuse does not write (:data:`_UNWRITTEN`),
     or for one of Parquet, which is compressed already."""
     last = target.suffix.lower()
     if last in _UNWRITTEN:
+        written = ", ".join(c.suffix for c in COMPRESSIONS)
         raise ParameterError(
-            f"{target}: a {last} file is not written; {', '.join(COMPRESSIONS)} compress an output"
+            f"{target}: a {last} file is not written; {written} compress an output"
         )
-    if last in COMPRESSIONS and Path(target.stem).suffix.lower() == ".parquet":
+    if compression_named(target) and Path(target.stem).suffix.lower() == ".parquet":
         raise ParameterError(f"{target}: Parquet is compressed already; name it {target.stem}")
 
 
@@ -382,7 +370,7 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
         staged.append((tmp, target))
         try:
             os.fchmod(fd, mode)
-            _write_into(fd, write, binary, target.suffix)
+            _write_into(fd, write, binary, target)
         except OSError as exc:
             raise _cannot(target, exc) from exc
 
@@ -396,31 +384,25 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
         raise
     for target, write, binary in streams:
         try:
-            _write_into(target, write, binary, target.suffix)
+            _write_into(target, write, binary, target)
         except OSError as exc:
             raise _cannot(target, exc) from exc
 
 
-#: Outputs compressed by their name's last suffix, as pandas reads a table back (``read_csv``
-#: infers it from the name): the standard library's streams, byte-stable (gzip's header holds
-#: no time and no name). A table named ``flight.csv.gz`` was plain CSV under a name that every
-#: reader takes for gzip. Names that ask for another compression are refused
-#: (:func:`check_paths`).
-COMPRESSIONS: dict[str, Callable[[IO[bytes]], io.BufferedIOBase]] = {  # each closed by its user
-    ".gz": lambda raw: gzip.GzipFile(filename="", mode="wb", compresslevel=6, fileobj=raw, mtime=0),
-    ".bz2": lambda raw: bz2.BZ2File(raw, "wb"),
-    ".xz": lambda raw: lzma.LZMAFile(raw, "wb"),  # noqa: SIM115
-}
+#: Compressions an output's name may ask for that altfuse does not write (those it does:
+#: :data:`altfuse.files.COMPRESSIONS`; ``flight.csv.gz`` was plain CSV under a name that every
+#: reader takes for gzip): refused (:func:`check_paths`).
 _UNWRITTEN = (".zip", ".zst", ".tar", ".tgz", ".lz4", ".7z")
 
 
-def _write_into(file: int | Path, write: Writer, binary: bool, suffix: str = "") -> None:
+def _write_into(file: int | Path, write: Writer, binary: bool, target: Path) -> None:
     """``write`` into ``file`` (a descriptor, closed after, or a path), as bytes or UTF-8 text,
-    compressed as ``suffix`` (the target's) asks (:data:`COMPRESSIONS`)."""
+    compressed as the ``target``'s name asks (:func:`altfuse.files.compression_named`)."""
+    packed = compression_named(target)
     with open(file, "wb") as raw, contextlib.ExitStack() as layers:
         out: IO[Any] | io.IOBase = raw
-        if suffix.lower() in COMPRESSIONS:
-            out = layers.enter_context(COMPRESSIONS[suffix.lower()](raw))
+        if packed is not None:
+            out = layers.enter_context(packed.open(raw, "wb"))
         if not binary:
             out = layers.enter_context(
                 io.TextIOWrapper(cast(IO[bytes], out), encoding="utf-8", newline="")

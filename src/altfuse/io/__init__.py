@@ -2,33 +2,30 @@
 
 from __future__ import annotations
 
-import bz2
 import contextlib
-import gzip
 import hashlib
 import io
 import lzma
-import stat
 import sys
 import tempfile
 from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
-from typing import cast
+from typing import IO, Any, Literal, cast
 
 from altfuse.errors import AltfuseError, LogReadError
+from altfuse.files import Compression, compression_of, is_stream
 from altfuse.io.framing import FMT_HEADER
 from altfuse.model import FlightLog
 
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 _SNIFF_BYTES = 4096
-#: Logs kept compressed, as fleets archive them (``flight.bin.gz``), known by their first
-#: bytes: gzip, bzip2, xz. Decompressed into a temporary file, read from it, and described as
-#: the file given (its name, size and sha256: the file a later ``--skip-existing`` hashes).
-COMPRESSIONS = {b"\x1f\x8b": "gzip", b"BZh": "bzip2", b"\xfd7zXZ\x00": "xz"}
-#: Their names' last suffixes, which a batch finds and strips from its outputs' names.
-COMPRESSED_SUFFIXES = (".gz", ".bz2", ".xz")
+#: What a log is by its first bytes (:func:`_kind`): compressed, as fleets archive logs
+#: (``flight.bin.gz``: decompressed into a temporary file, read from it, and described as the
+#: file given, its name, size and sha256, what a later ``--skip-existing`` hashes), a ULog, or a
+#: DataFlash log.
+Kind = Compression | Literal["ulog", "dataflash"]
 
 
 def sha256_of(path: Path) -> str:
@@ -60,10 +57,14 @@ def read_log(path: str | Path) -> FlightLog:
         The file is missing, empty, unreadable, or not a format altfuse reads.
     """
     path = Path(path)
-    if _piped(path):
+    if str(path) == "-" or is_stream(path):  # the log flows in: standard input, a pipe
         return _read_piped(path)
-    kind = _kind(path, _head(path))
-    if kind in COMPRESSIONS.values():
+    return _read_as(path, _kind(path, _head(path)))
+
+
+def _read_as(path: Path, kind: Kind) -> FlightLog:
+    """The log at ``path``, read as what its first bytes say it is (:func:`_kind`)."""
+    if isinstance(kind, Compression):
         return _read_compressed(path, kind)
     if kind == "ulog":
         from altfuse.io.ulog import read_ulog
@@ -74,12 +75,11 @@ def read_log(path: str | Path) -> FlightLog:
     return read_dataflash(path)
 
 
-def _kind(path: Path, head: bytes) -> str:
-    """What a log whose first bytes are ``head`` is: one of COMPRESSIONS', ``ulog`` or
-    ``dataflash``; a LogReadError where it is none of them."""
-    for magic, kind in COMPRESSIONS.items():
-        if head.startswith(magic):
-            return kind
+def _kind(path: Path, head: bytes) -> Kind:
+    """What a log whose first bytes are ``head`` is; a LogReadError where it is no log."""
+    packed = compression_of(head)
+    if packed is not None:
+        return packed
     if head.startswith(ULOG_MAGIC):
         return "ulog"
     if FMT_HEADER not in head:
@@ -87,18 +87,6 @@ def _kind(path: Path, head: bytes) -> str:
             f"{path}: not a DataFlash log (no FMT record in its first bytes) nor a ULog"
         )
     return "dataflash"
-
-
-def _piped(path: Path) -> bool:
-    """Whether the log flows through ``path`` rather than lying in it: ``-`` (standard input),
-    a named pipe, a character device (``/dev/stdin`` on a terminal)."""
-    if str(path) == "-":
-        return True
-    try:
-        mode = path.stat().st_mode
-    except OSError:
-        return False
-    return stat.S_ISFIFO(mode) or stat.S_ISCHR(mode)
 
 
 def _head(path: Path) -> bytes:
@@ -121,24 +109,40 @@ def _head(path: Path) -> bytes:
     return head
 
 
-def _decompressing(path: Path, kind: str) -> io.BufferedIOBase:
-    """``path`` opened through its ``kind`` of compression (:data:`COMPRESSIONS`)."""
-    if kind == "gzip":
-        return gzip.GzipFile(path, "rb")
-    if kind == "bzip2":
-        return bz2.BZ2File(path, "rb")
-    return lzma.LZMAFile(path, "rb")
+class _Hashed(io.RawIOBase):
+    """A file read through, its sha256 and size taken on the way: a compressed log is read
+    once (a second pass hashed it after its decompression)."""
+
+    def __init__(self, raw: io.BufferedReader) -> None:
+        self.raw, self.digest, self.size = raw, hashlib.sha256(), 0
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer: Any) -> int:
+        n = self.raw.readinto(buffer)
+        self.digest.update(memoryview(buffer)[:n])
+        self.size += n
+        return int(n)
+
+    def drain(self) -> None:
+        """Hash what the decompressor left unread (a stream cut short, trailing bytes)."""
+        for _ in iter(lambda: self.read(1 << 20), b""):
+            pass
 
 
-def _read_compressed(path: Path, kind: str) -> FlightLog:
-    """The log compressed in ``path`` (``kind``: gzip, bzip2, xz), decompressed and read
-    (:func:`_read_copied`); described as the file given (its size and sha256)."""
+def _read_compressed(path: Path, packed: Compression) -> FlightLog:
+    """The log compressed in ``path``, decompressed and read (:func:`_read_copied`);
+    described as the file given (its size and sha256, taken as it is decompressed)."""
     try:
-        with _decompressing(path, kind) as stream:
-            flight = _read_copied(path, stream, f"its {kind} compression")
+        with path.open("rb") as raw:
+            hashed = _Hashed(raw)
+            with packed.open(cast(IO[bytes], hashed), "rb") as stream:
+                flight = _read_copied(path, stream, f"its {packed.name} compression")
+            hashed.drain()
     except OSError as exc:
         raise LogReadError(f"{path}: cannot decompress ({exc.strerror or exc})") from exc
-    return replace(flight, sha256=sha256_of(path), size_bytes=path.stat().st_size)
+    return replace(flight, sha256=hashed.digest.hexdigest(), size_bytes=hashed.size)
 
 
 def _read_piped(path: Path) -> FlightLog:
@@ -162,14 +166,14 @@ def _read_copied(path: Path, stream: io.BufferedIOBase, source: str) -> FlightLo
     log, and is not copied on."""
     with tempfile.TemporaryDirectory(prefix="altfuse-") as folder:
         copy = Path(folder) / (path.with_suffix("").name or "log")
-        cut, head = "", b""
+        cut, head, kind = "", b"", None
         with copy.open("wb") as out:
             try:  # a buffered read loses what it holds when the stream breaks: read1's don't
                 while chunk := stream.read1(1 << 20):
-                    if len(head) < _SNIFF_BYTES:
+                    if kind is None:
                         head += chunk[: _SNIFF_BYTES - len(head)]
                         if len(head) == _SNIFF_BYTES:
-                            _kind(path, head)  # no log's first bytes: the rest is not copied
+                            kind = _kind(path, head)  # no log's first bytes: the rest not copied
                     out.write(chunk)
             except (EOFError, OSError, lzma.LZMAError, ValueError) as exc:
                 if not head:
@@ -177,9 +181,8 @@ def _read_copied(path: Path, stream: io.BufferedIOBase, source: str) -> FlightLo
                 cut = f"{source} cut after {out.tell()} bytes ({exc}): read up to there"
         if not head:
             raise LogReadError(f"{path}: nothing came from {source}")
-        _kind(path, head)
         try:
-            flight = read_log(copy)
+            flight = _read_as(copy, _kind(path, head) if kind is None else kind)
         except AltfuseError as exc:  # said of the log given, not of its copy
             exc.args = (str(exc).replace(str(copy), str(path)), *exc.args[1:])
             raise
