@@ -1,14 +1,20 @@
-"""altfuse.compiled: the loops numba compiles on a machine's first run are said, not silent."""
+"""altfuse.compiled: the loops numba compiles on a machine's first run are said, not silent;
+they are kept where they can be, also where the install cannot be written."""
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+import os
+import tempfile
+import types
+from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import numba
 import pytest
 
-import altfuse.compiled  # noqa: F401 (registers the listener on numba's compile events)
+import altfuse.compiled  # registers the listener on numba's compile events
+from altfuse.compiled import compiled
 
 
 def _loop(module: str) -> Callable[[float], float]:
@@ -32,3 +38,86 @@ def test_the_first_compilation_of_a_modules_loops_is_said_once(
     assert _loop("altfuse.io.a_new_reader")(2.0) == 3.0  # another loop of the same module
     assert _loop("someone_elses_package")(3.0) == 4.0  # not altfuse's: not ours to say
     assert not [r for r in caplog.records if r.name == "altfuse.progress"]
+
+
+def _twice(x: float) -> float:
+    return 2.0 * x
+
+
+@pytest.fixture
+def no_cache_choice(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """altfuse.compiled's choice of cache directory made afresh in the test, and forgotten."""
+    monkeypatch.setattr(altfuse.compiled._CONFIG, "CACHE_DIR", "")
+    altfuse.compiled.cache_dir.cache_clear()
+    yield
+    altfuse.compiled.cache_dir.cache_clear()
+
+
+def _unwritable(*where: str) -> Callable[[Path], bool]:
+    """altfuse.compiled._writable, but False for directories named as in ``where``."""
+    writable = altfuse.compiled._writable
+    return lambda d: d.name not in where and d.parent.name not in where and writable(d)
+
+
+@pytest.mark.usefixtures("no_cache_choice")
+def test_an_install_that_cannot_be_written_keeps_its_loops_in_the_users_cache(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    # numba refused such an install at import ("cannot cache function ...: no locator
+    # available") where the user had no writable home either
+    monkeypatch.setattr(altfuse.compiled, "_writable", _unwritable("__pycache__"))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    first = compiled(_twice)
+    assert first(2.0) == 4.0
+    kept = Path(first.stats.cache_path)  # type: ignore[attr-defined]
+    digest = altfuse.compiled.sources_digest(Path(__file__).resolve().parent)
+    assert kept.is_relative_to(tmp_path / "altfuse" / f"numba-{digest[:16]}")
+    assert list(kept.glob("*.nbi")), "nothing cached"
+    again = compiled(_twice)  # as the next process would: loaded, not compiled
+    assert again(3.0) == 6.0
+    assert sum(again.stats.cache_hits.values()) == 1  # type: ignore[attr-defined]
+
+
+@pytest.mark.usefixtures("no_cache_choice")
+def test_with_no_cache_directory_the_loops_are_compiled_and_that_is_said_once(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    monkeypatch.setattr(altfuse.compiled, "_writable", lambda _d: False)
+    caplog.set_level(logging.INFO, logger="altfuse")
+    loops = []
+    for module in ("altfuse.uncached_a", "altfuse.uncached_b"):
+        loop = types.FunctionType(_twice.__code__, globals())
+        loop.__module__ = module  # as if a loop of that module
+        loops.append(compiled(loop))
+    assert [loop(1.5) for loop in loops] == [3.0, 3.0]
+    assert [loop.stats.cache_path for loop in loops] == [None, None]  # type: ignore[attr-defined]
+    said = [(r.levelname, r.getMessage()) for r in caplog.records]
+    assert said == [
+        (
+            "WARNING",
+            "compiling altfuse's loops (numba) for this run only, as for every run: no cache "
+            "directory can be written (NUMBA_CACHE_DIR names one)",
+        )
+    ]
+
+
+def test_a_temporary_cache_directory_is_used_only_when_no_one_else_can_write_it(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.setattr(altfuse.compiled._CONFIG, "CACHE_DIR", "")
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    mine = tmp_path / f"altfuse-{os.getuid()}"
+    assert list(altfuse.compiled._cache_roots())[-1] == mine  # the last resort
+    assert mine.stat().st_mode & 0o777 == 0o700
+    mine.chmod(0o777)  # made by anyone, or open to them: their code would be loaded
+    assert mine not in altfuse.compiled._cache_roots()
+    mine.rmdir()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir(mode=0o700)
+    mine.symlink_to(elsewhere)
+    assert mine not in altfuse.compiled._cache_roots()
+    if os.getuid() == 0:  # someone else's
+        mine.unlink()
+        mine.mkdir(mode=0o700)
+        os.chown(mine, 65534, 65534)
+        assert mine not in altfuse.compiled._cache_roots()

@@ -13,24 +13,124 @@ said once per process on the ``altfuse.progress`` logger (the progress line of `
 fuse`` on a terminal, a line with ``-v``), by a listener on numba's compile events
 (:class:`_Compiling`, registered at import): numba broadcasts them only where nothing was
 cached, never when it loads a loop.
+
+Where the cache is kept (:func:`cache_dir`): numba's own place, the ``__pycache__`` beside the
+source, where that can be written. An install the user cannot write (a system's
+``site-packages``, a container's image run as another user) with no writable home made numba
+refuse at import: "RuntimeError: cannot cache function '_slopes': no locator available", every
+command an internal error (numba issues 4908, 5566). There the loops are kept in a directory
+of altfuse's own, named after a digest of their package's sources (a loop compiled with
+another file's functions must not outlive a change to them), under ``NUMBA_CACHE_DIR`` where
+the user set it, else the user's cache directory, else the system's temporary one (a directory
+of the user's own, no one else's to write); with none writable they are compiled by each
+process, and that is said as a warning.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import hashlib
+import inspect
 import logging
-from collections.abc import Callable
+import os
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any, TypeVar, cast
 
 import numba
 from numba.core import event
 
 F = TypeVar("F", bound=Callable[..., Any])
+#: numba's settings (set from its environment variables at its import, untyped)
+_CONFIG: Any = numba.config
 
 
 def compiled(function: F) -> F:
-    """``function`` compiled to machine code (nopython mode, cached), releasing the GIL while
-    it runs (the reader hashes the file in a thread meanwhile)."""
-    return cast(F, numba.njit(cache=True, nogil=True)(function))
+    """``function`` compiled to machine code (nopython mode, cached in :func:`cache_dir`),
+    releasing the GIL while it runs (the reader hashes the file in a thread meanwhile)."""
+    directory = cache_dir(Path(inspect.getfile(function)).resolve().parent)
+    if directory is None:
+        _UNCACHED.add(function.__module__)
+        return cast(F, numba.njit(nogil=True)(function))
+    with _numba_cache_dir(directory):  # numba reads it once, when the function is decorated
+        return cast(F, numba.njit(cache=True, nogil=True)(function))
+
+
+@functools.cache
+def cache_dir(package: Path) -> str | None:
+    """Where numba keeps the compiled loops of ``package`` (a directory of sources), as numba's
+    ``CACHE_DIR``: "" (numba's own choice, ``package/__pycache__``) where that can be written;
+    else a directory named after :func:`sources_digest` under the first of ``NUMBA_CACHE_DIR``,
+    the user's cache directory and the system's temporary one that can be; None where none can
+    (module docstring)."""
+    if not _CONFIG.CACHE_DIR and _writable(package / "__pycache__"):
+        return ""
+    kept = f"numba-{sources_digest(package)[:16]}"
+    for root in _cache_roots():
+        if _writable(root / kept):
+            return str(root / kept)
+    return None
+
+
+def sources_digest(package: Path) -> str:
+    """sha256 of the ``.py`` files of ``package``, names and contents, in name order."""
+    digest = hashlib.sha256()
+    for source in sorted(package.glob("*.py")):
+        digest.update(source.name.encode() + b"\0" + source.read_bytes())
+    return digest.hexdigest()
+
+
+def _cache_roots() -> Iterator[Path]:
+    """The directories altfuse may keep compiled loops in, by preference (:func:`cache_dir`)."""
+    if _CONFIG.CACHE_DIR:
+        yield Path(_CONFIG.CACHE_DIR) / "altfuse"
+    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    if os.path.isabs(home):  # "~" unexpanded: no home known
+        yield Path(home) / "altfuse"
+    shared = Path(tempfile.gettempdir()) / f"altfuse-{_user()}"
+    with contextlib.suppress(OSError):
+        shared.mkdir(mode=0o700, exist_ok=True)
+        mine = shared.lstat()
+        # a directory of the shared temporary one that someone else made or can write holds
+        # code of theirs: numba would load it
+        if not os.path.islink(shared) and mine.st_uid == _uid() and not mine.st_mode & 0o077:
+            yield shared
+
+
+def _writable(directory: Path) -> bool:
+    """Whether ``directory`` exists or can be made, and a file can be made in it (numba's own
+    test of a cache directory)."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=directory).close()
+    except OSError:
+        return False
+    return True
+
+
+def _uid() -> int:
+    return os.getuid() if hasattr(os, "getuid") else 0
+
+
+def _user() -> str:
+    return str(os.getuid()) if hasattr(os, "getuid") else os.environ.get("USERNAME", "user")
+
+
+@contextlib.contextmanager
+def _numba_cache_dir(directory: str) -> Iterator[None]:
+    """numba's ``CACHE_DIR`` set to ``directory`` meanwhile."""
+    before = _CONFIG.CACHE_DIR
+    _CONFIG.CACHE_DIR = directory
+    try:
+        yield
+    finally:
+        _CONFIG.CACHE_DIR = before
+
+
+#: The modules with loops that :func:`compiled` could keep nowhere: compiled by every process.
+_UNCACHED: set[str] = set()
 
 
 class _Compiling(event.Listener):
@@ -48,9 +148,16 @@ class _Compiling(event.Listener):
         module = str(getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__module__", ""))
         if self.depth == 1 and module.startswith("altfuse") and module not in self.said:
             self.said.add(module)
-            logging.getLogger("altfuse.progress").info(
-                "compiling %s (numba, once per machine)", module
-            )
+            if module in _UNCACHED:  # one line for them all
+                if not self.said & _UNCACHED - {module}:
+                    logging.getLogger("altfuse").warning(
+                        "compiling altfuse's loops (numba) for this run only, as for every run: "
+                        "no cache directory can be written (NUMBA_CACHE_DIR names one)"
+                    )
+            else:
+                logging.getLogger("altfuse.progress").info(
+                    "compiling %s (numba, once per machine)", module
+                )
 
     def on_end(self, _ev: event.Event) -> None:
         self.depth -= 1
