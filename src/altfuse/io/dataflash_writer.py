@@ -10,7 +10,8 @@ writes is what pymavlink reads.
 from __future__ import annotations
 
 import struct
-from typing import BinaryIO
+from collections.abc import Callable, Sequence
+from typing import Any, BinaryIO
 
 from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_TYPE, FORMAT_TO_STRUCT, HEADER, SYNC
 
@@ -34,23 +35,38 @@ UNITS = {
 MULTIPLIERS = {"-": 0.0, "?": 1.0, "0": 1.0, "B": 1e-2, "C": 1e-3, "F": 1e-6, "G": 1e-7}
 
 
-def _struct(fmt: str) -> struct.Struct:
+def record_struct(fmt: str) -> struct.Struct:
+    """The layout of a record's payload of format ``fmt`` (little-endian, packed)."""
     return struct.Struct("<" + "".join(FORMAT_TO_STRUCT[c][0] for c in fmt))
 
 
-def _encode(fmt: str, values: tuple[object, ...]) -> list[object]:
-    out: list[object] = []
-    for c, v in zip(fmt, values, strict=True):
-        _, scale, kind = FORMAT_TO_STRUCT[c]
-        if kind is str:
-            out.append(str(v).encode("ascii"))
-        elif scale is not None:
-            out.append(round(float(v) / scale))  # type: ignore[arg-type]
-        elif kind is float:
-            out.append(float(v))  # type: ignore[arg-type]
-        else:
-            out.append(int(v))  # type: ignore[call-overload]
-    return out
+def encoder(fmt: str) -> Callable[[Sequence[object]], list[object]]:
+    """What turns the fields of a record of format ``fmt``, numbers in their units or their
+    text, into what :func:`record_struct` packs: scaled fields divided by their scale and
+    rounded, text encoded. A character pymavlink does not know: KeyError."""
+    converters = [_converter(c) for c in fmt]
+    return lambda values: [f(v) for f, v in zip(converters, values, strict=True)]
+
+
+def _converter(char: str) -> Callable[[Any], object]:
+    _, scale, kind = FORMAT_TO_STRUCT[char]
+    if kind is str:
+        return lambda v: str(v).encode("utf-8")
+    if scale is not None:
+        return lambda v: round(float(v) / scale)
+    return float if kind is float else _integer
+
+
+def _integer(value: Any) -> int:
+    """An integer field's value; a text's may be written as a float with nothing after its
+    point ("3.0")."""
+    try:
+        return int(value)
+    except ValueError:
+        number = float(value)
+        if not number.is_integer():
+            raise
+        return int(number)
 
 
 class DataFlashWriter:
@@ -65,7 +81,9 @@ class DataFlashWriter:
     def __init__(self, stream: BinaryIO) -> None:
         self.stream = stream
         self.records = 0
-        self._types: dict[str, tuple[int, str, struct.Struct]] = {}
+        self._types: dict[
+            str, tuple[int, Callable[[Sequence[object]], list[object]], struct.Struct]
+        ] = {}
         self._next_type = 129
         self._declare("FMT", FMT_TYPE, FMT_FORMAT, FMT_COLUMNS)
         self.define("UNIT", "QbZ", "TimeUS,Id,Label")
@@ -77,8 +95,8 @@ class DataFlashWriter:
             self.write("MULT", 0, ord(mid), mult)
 
     def _declare(self, name: str, type_id: int, fmt: str, columns: str) -> None:
-        packer = _struct(fmt)
-        self._types[name] = (type_id, fmt, packer)
+        packer = record_struct(fmt)
+        self._types[name] = (type_id, encoder(fmt), packer)
         length = HEADER + packer.size
         self.write("FMT", type_id, length, name, fmt, columns)
 
@@ -96,6 +114,6 @@ class DataFlashWriter:
 
     def write(self, name: str, *values: object) -> None:
         """Write one record of type ``name``; scaled fields take their value in the real unit."""
-        type_id, fmt, packer = self._types[name]
-        self.stream.write(SYNC + bytes([type_id]) + packer.pack(*_encode(fmt, values)))
+        type_id, encode, packer = self._types[name]
+        self.stream.write(SYNC + bytes([type_id]) + packer.pack(*encode(values)))
         self.records += 1
