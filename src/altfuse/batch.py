@@ -65,6 +65,10 @@ LOG_PATTERNS = tuple(
     for log in (".bin", ".ulg")
     for packed in ("", *(c.suffix for c in COMPRESSIONS))
 )
+#: DataFlash logs written as text (:mod:`altfuse.io.dataflash_text`): not taken by default (a
+#: folder may hold a log as ``.bin`` and as the ``.log`` converted from it, and other
+#: programs' logs), but with ``--pattern``.
+TEXT_PATTERN = "*.log"
 #: The summary as Parquet too, with ``--format parquet``.
 PARQUET_SUMMARY = "summary.parquet"
 _PR_SET_PDEATHSIG = 1
@@ -532,7 +536,13 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
     todo = plan(paths, out_dir, pattern)
     if not todo:
         wanted = " or ".join(repr(p) for p in _patterns(pattern))
-        raise LogReadError(f"no file matching {wanted} under {', '.join(map(str, paths))}")
+        texts = len(find_logs(paths, TEXT_PATTERN))
+        hint = (
+            f"; {texts} {TEXT_PATTERN} there: --pattern '{TEXT_PATTERN}' takes them"
+            if texts
+            else ""
+        )
+        raise LogReadError(f"no file matching {wanted} under {', '.join(map(str, paths))}{hint}")
     if shard is not None:
         todo = todo[shard[0] - 1 :: shard[1]]
     out = Path(out_dir)

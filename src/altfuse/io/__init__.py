@@ -23,9 +23,10 @@ ULOG_MAGIC = b"ULog\x01\x12\x35"
 _SNIFF_BYTES = 4096
 #: What a log is by its first bytes (:func:`_kind`): compressed, as fleets archive logs
 #: (``flight.bin.gz``: decompressed into a temporary file, read from it, and described as the
-#: file given, its name, size and sha256, what a later ``--skip-existing`` hashes), a ULog, or a
-#: DataFlash log.
-Kind = Compression | Literal["ulog", "dataflash"]
+#: file given, its name, size and sha256, what a later ``--skip-existing`` hashes), a ULog, a
+#: DataFlash log, or one written as text (``flight.log``: converted into a temporary binary
+#: log, :mod:`altfuse.io.dataflash_text`, and described as the file given).
+Kind = Compression | Literal["ulog", "dataflash", "dataflash-text"]
 
 
 def sha256_of(path: Path) -> str:
@@ -70,6 +71,8 @@ def _read_as(path: Path, kind: Kind) -> FlightLog:
         from altfuse.io.ulog import read_ulog
 
         return read_ulog(path)
+    if kind == "dataflash-text":
+        return _read_text(path)
     from altfuse.io.dataflash import read_dataflash
 
     return read_dataflash(path)
@@ -82,11 +85,16 @@ def _kind(path: Path, head: bytes) -> Kind:
         return packed
     if head.startswith(ULOG_MAGIC):
         return "ulog"
-    if FMT_HEADER not in head:
-        raise LogReadError(
-            f"{path}: not a DataFlash log (no FMT record in its first bytes) nor a ULog"
-        )
-    return "dataflash"
+    if FMT_HEADER in head:
+        return "dataflash"
+    from altfuse.io.dataflash_text import is_text_log
+
+    if is_text_log(head):
+        return "dataflash-text"
+    raise LogReadError(
+        f"{path}: not a DataFlash log (no FMT record in its first bytes, as binary or as "
+        "text) nor a ULog"
+    )
 
 
 def _head(path: Path) -> bytes:
@@ -143,6 +151,31 @@ def _read_compressed(path: Path, packed: Compression) -> FlightLog:
     except OSError as exc:
         raise LogReadError(f"{path}: cannot decompress ({exc.strerror or exc})") from exc
     return replace(flight, sha256=hashed.digest.hexdigest(), size_bytes=hashed.size)
+
+
+def _read_text(path: Path) -> FlightLog:
+    """The DataFlash text log ``path``, each line converted into its binary record as it is
+    read (:class:`~altfuse.io.dataflash_text.BinaryFromText`), and the binary log read
+    (:func:`_read_copied`); described as the file given (its size and sha256, taken as it is
+    converted). Lines left out are damage, said as a binary log's skipped bytes are."""
+    from altfuse.io.dataflash_text import BinaryFromText
+
+    try:
+        with path.open("rb") as raw:
+            hashed = _Hashed(raw)
+            converted = BinaryFromText(io.BufferedReader(hashed))
+            flight = _read_copied(path, io.BufferedReader(converted), "its DataFlash text")
+            hashed.drain()
+    except OSError as exc:
+        raise LogReadError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    return replace(
+        flight,
+        sha256=hashed.digest.hexdigest(),
+        size_bytes=hashed.size,
+        notes=(*flight.notes, converted.note()),
+        damaged=(*flight.damaged, converted.note()) if converted.left_out else flight.damaged,
+        reader=f"DataFlash text, converted to binary (altfuse.io.dataflash_text); {flight.reader}",
+    )
 
 
 def _read_piped(path: Path) -> FlightLog:
