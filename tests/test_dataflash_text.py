@@ -4,18 +4,22 @@ from __future__ import annotations
 
 import gzip
 import hashlib
+import tempfile
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from pymavlink import DFReader
 
 from altfuse.cli import cli
 from altfuse.errors import LogReadError
 from altfuse.io import read_log
 from altfuse.io.dataflash_text import is_text_log
-from conftest import SAMPLE_LOG, shared_log
+from conftest import ROOT, SAMPLE_LOG, shared_log
 
 
 def as_text(log: Path, out: Path, digits: int | None = None, newline: str = "\n") -> Path:
@@ -171,3 +175,54 @@ def test_a_batch_takes_text_logs_when_asked(tmp_path: Path) -> None:
     )
     assert taken.exit_code == 0, taken.output
     assert (tmp_path / "b" / "mission.csv").exists()
+
+
+@cache
+def _paper_a_lines() -> tuple[bytes, ...]:
+    with tempfile.TemporaryDirectory() as folder:
+        text = as_text(ROOT / "sample_logs" / "paper_a.bin", Path(folder) / "paper_a.log")
+        return tuple(text.read_bytes().splitlines(keepends=True))
+
+
+@settings(
+    max_examples=30, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
+@given(
+    edits=st.lists(
+        st.tuples(
+            st.sampled_from(["delete", "insert", "flip", "cut", "delimiter", "swap"]),
+            st.floats(0, 1),
+            st.binary(max_size=40),
+        ),
+        min_size=1,
+        max_size=20,
+    ),
+    end=st.floats(0.05, 1),
+)
+def test_damaged_text_logs_never_crash(edits: list[tuple[str, float, bytes]], end: float) -> None:
+    """Property: a text log damaged line by line gives a valid output or one error line."""
+    lines = list(_paper_a_lines())
+    for what, where, junk in edits:
+        i = int(where * (len(lines) - 1))
+        if what == "delete":
+            del lines[i]
+        elif what == "insert":
+            lines.insert(i, junk + b"\n")
+        elif what == "flip" and junk:
+            lines[i] = lines[i][: len(junk)] + junk[:1] + lines[i][len(junk) + 1 :]
+        elif what == "cut":
+            lines[i] = lines[i][: len(junk)]
+        elif what == "delimiter":
+            lines[i] = lines[i].replace(b", ", b",", 1)
+        elif what == "swap":
+            lines[i], lines[-1 - i] = lines[-1 - i], lines[i]
+    data = b"".join(lines)
+    with tempfile.TemporaryDirectory() as folder:
+        log, out = Path(folder) / "damaged.log", Path(folder) / "out.csv"
+        log.write_bytes(data[: int(end * len(data))])
+        result = CliRunner().invoke(cli, ["fuse", str(log), "-o", str(out), "-m", "support"])
+        assert result.exit_code in (0, 1), (edits, end, result.output)
+        if result.exit_code == 1:
+            assert result.stderr.count("\n") == 1, result.stderr
+            assert result.stderr.startswith("altfuse: error: ")
+            assert not out.exists()
