@@ -12,6 +12,7 @@ import re
 import sys
 import threading
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -110,6 +111,23 @@ def test_simulated_log_reads_back_what_was_written(tmp_path: Path) -> None:
     truth = {r.name: r for r in flight.references}["sim"]
     assert truth.t.size == 600
     assert flight.skipped_bytes == 0
+
+
+def test_the_blended_gps_instance_is_not_a_sensor(tmp_path: Path) -> None:
+    """Blending receivers (GPS_AUTO_SWITCH 2), ArduPilot 4.1+ logs their blend as GPS instance
+    2: read as a third GPS it was fused beside the two it averages. Left out, and said."""
+    sim = simulate_flight("mission", seed=3, duration_s=60.0)
+    gps = sim.records["GPS"]
+    second = [(t, (1, *v[1:8], v[8] + 0.4, *v[9:])) for t, v in gps]
+    blend = [(t, (2, *v[1:8], v[8] + 0.2, *v[9:])) for t, v in gps]
+    path = tmp_path / "blended.bin"
+    write_simulated_log(replace(sim, records={**sim.records, "GPS": gps + second + blend}), path)
+    flight = read_log(path)
+    assert [s.name for s in flight.sensors if s.kind == "gps"] == ["gps", "gps2"]
+    assert flight.dropped_sources["gps3"] == (
+        "GPS[2].Alt: not fused: the blend of the receivers (GPS_AUTO_SWITCH 2), not a sensor of "
+        "its own"
+    )
 
 
 def test_reading_a_damaged_log_prints_nothing(capfd: pytest.CaptureFixture[str]) -> None:

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import logging
 import re
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from concurrent.futures import Future
 from dataclasses import replace
 from pathlib import Path
@@ -74,6 +74,11 @@ _TEXT_CHARS = frozenset("nNZ")
 _NOT_NUMBERS = _TEXT_CHARS | {"a"}
 #: The most instances of one sensor type ArduPilot logs (RNGFND_MAX_INSTANCES is 10).
 MAX_INSTANCES = 10
+#: The GPS instance that is the blend of the receivers, where GPS_AUTO_SWITCH is 2 (ArduPilot's
+#: GPS_BLENDED_INSTANCE, GPS_MAX_RECEIVERS: 2), logged since 4.1 as one more ``GPS`` instance
+#: (as ``GPSB`` before, not read): a weighted mean of the receivers' heights, no sensor of its
+#: own; fused beside them, their errors would count twice.
+BLENDED_GPS_INSTANCE = 2
 #: Format characters whose scale pymavlink applies itself.
 _SELF_SCALED = frozenset("cCeEL")
 #: Multiplier ids that mean "none" ('-'), "unknown" ('?') or 1 ('0').
@@ -331,9 +336,14 @@ def _add_instances(  # noqa: PLR0913 (what each instance's source is, as add() t
     instance_field: str,
     default: int,
     invalid: dict[str, Any],
+    not_sensors: Mapping[int, str] | None = None,
 ) -> None:
-    """Add one series per instance of ``type_name.col``, named ``kind``, ``kind2``, ..."""
+    """Add one series per instance of ``type_name.col``, named ``kind``, ``kind2``, ...; the
+    instances in ``not_sensors`` left out, for the reason given."""
     for inst, sel in _instances(b.rec, type_name, instance_field, default):
+        if inst in (not_sensors or {}) and b.rec.has(type_name, instance_field):
+            b.dropped_sources[_instance_name(kind, inst)] = (not_sensors or {})[inst]
+            continue
         b.add(
             name=_instance_name(kind, inst),
             kind=kind,
@@ -383,6 +393,10 @@ def _read_gps(b: _Builder) -> None:
             invalid={
                 "GPS Status < 3 (no 3D fix)": no_fix,
                 NOT_CONVERGED: b.not_converged[type_name],
+            },
+            not_sensors={
+                BLENDED_GPS_INSTANCE: f"{type_name}[{BLENDED_GPS_INSTANCE}].Alt: not fused: the "
+                "blend of the receivers (GPS_AUTO_SWITCH 2), not a sensor of its own"
             },
         )
 
