@@ -130,6 +130,21 @@ def test_the_blended_gps_instance_is_not_a_sensor(tmp_path: Path) -> None:
     )
 
 
+def test_a_rangefinder_not_facing_down_is_not_an_altitude(tmp_path: Path) -> None:
+    """A second rangefinder facing forward (obstacle avoidance: Orient 0, Good, a wall 5 m
+    ahead) was fused as a height; PX4's ULog reader already kept only downward ones."""
+    sim = simulate_flight("mission", seed=3, duration_s=60.0)
+    down = sim.records["RFND"]
+    ahead = [(t, (1, 500, 4, 0)) for t, _ in down]
+    path = tmp_path / "avoidance.bin"
+    write_simulated_log(replace(sim, records={**sim.records, "RFND": down + ahead}), path)
+    flight = read_log(path)
+    assert [s.name for s in flight.sensors if s.kind == "rangefinder"] == ["rangefinder"]
+    assert flight.dropped_sources["rangefinder2"] == (
+        f"RFND.Dist: no usable sample ({len(ahead)} Orient != 25 (not facing down))"
+    )
+
+
 def test_reading_a_damaged_log_prints_nothing(capfd: pytest.CaptureFixture[str]) -> None:
     flight = read_log(shared_log("ardupilot/rima48_test_cascade.BIN"))
     out, err = capfd.readouterr()

@@ -287,3 +287,27 @@ def test_a_gps_is_read_from_its_first_epv_of_a_converged_fix(
     for speeds in ("vertical_velocity", "ground_speed", "ground_course"):
         was, now = getattr(plain, speeds), getattr(settled, speeds)
         np.testing.assert_array_equal(now.t, was.t[was.t >= after.t[0]])
+
+
+def test_a_distance_sensor_not_facing_down_is_left_out_and_said(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The log's one distance sensor made to face forward (orientation 0, obstacle avoidance):
+    no rangefinder, and the reason in the dropped sources (it was left out in silence)."""
+    import pyulog
+
+    class Forward(pyulog.ULog):  # type: ignore[misc]
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            for d in self.data_list:
+                if d.name == "distance_sensor":
+                    d.data["orientation"] = np.zeros_like(d.data["orientation"])
+
+    log = shared_log("px4/px4ulogrs_esc_status_log.ulg")
+    assert "rangefinder" in {s.kind for s in read_log(log).sensors}
+    monkeypatch.setattr(pyulog, "ULog", Forward)
+    flight = read_log(log)
+    assert "rangefinder" not in {s.kind for s in flight.sensors}
+    assert flight.dropped_sources["distance_sensor[0]"] == (
+        "distance_sensor[0].current_distance: orientation [0], not 25 (facing down): no height"
+    )

@@ -13,6 +13,11 @@ FloatArray = npt.NDArray[np.float64]
 
 #: The kinds of altitude source, in the order altfuse prefers them as a datum reference.
 SensorKind = Literal["baro", "gps", "rangefinder"]
+#: The orientation of a rangefinder that looks down, the one that measures a height: 25 in
+#: ArduPilot's (``ROTATION_PITCH_270``, ``RNGFND1_ORIENT``'s default), PX4's and MAVLink's
+#: (``MAV_SENSOR_ROTATION_PITCH_270``) rotation enums alike; one facing elsewhere (obstacle
+#: avoidance, a ceiling) measures no altitude.
+DOWNWARD = 25
 SENSOR_KINDS: tuple[SensorKind, ...] = get_args(SensorKind)
 #: What a series is: an altitude source, or a reference, speed or temperature beside them.
 SeriesKind = Literal[

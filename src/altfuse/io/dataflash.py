@@ -46,6 +46,7 @@ from altfuse.io import hashing
 from altfuse.io.fastdf import Format, Index, _text, index_file
 from altfuse.io.framing import FORMAT_TO_STRUCT
 from altfuse.model import (
+    DOWNWARD,
     Attitude,
     FlightLog,
     FloatArray,
@@ -434,10 +435,21 @@ def _read_baro(b: _Builder) -> bool:
     return found
 
 
-def _rangefinder_invalid(b: _Builder, type_name: str, dist: str, stat: str) -> dict[str, Any]:
-    if b.rec.has(type_name, stat):
-        return {"Stat != 4 (not Good)": b.rec.raw(type_name, stat) != 4}
-    return {"0 (no reading)": b.rec.raw(type_name, dist) <= 0}
+def _rangefinder_invalid(
+    b: _Builder, type_name: str, dist: str, stat: str, orient: str
+) -> dict[str, Any]:
+    """A rangefinder's samples to leave out: not Good (or 0 where no status is logged), and
+    not facing down where its orientation is logged (an avoidance sensor measures no height)."""
+    rec = b.rec
+    if rec.has(type_name, stat):
+        invalid = {"Stat != 4 (not Good)": rec.raw(type_name, stat) != 4}
+    else:
+        invalid = {"0 (no reading)": rec.raw(type_name, dist) <= 0}
+    if rec.has(type_name, orient):
+        invalid[f"{orient} != {DOWNWARD} (not facing down)"] = (
+            rec.raw(type_name, orient) != DOWNWARD
+        )
+    return invalid
 
 
 def _read_rangefinder(b: _Builder) -> bool:
@@ -453,7 +465,7 @@ def _read_rangefinder(b: _Builder) -> bool:
             _GROUND,
             instance_field="Instance",
             default=0,
-            invalid=_rangefinder_invalid(b, rfnd, "Dist", "Stat"),
+            invalid=_rangefinder_invalid(b, rfnd, "Dist", "Stat", "Orient"),
         )
     elif b.rec.n(rfnd):
         for inst in (0, 1):
@@ -468,7 +480,7 @@ def _read_rangefinder(b: _Builder) -> bool:
                 col=dist,
                 datum=_GROUND,
                 select=np.ones(b.rec.n(rfnd), dtype=bool),
-                invalid=_rangefinder_invalid(b, rfnd, dist, f"Stat{inst + 1}"),
+                invalid=_rangefinder_invalid(b, rfnd, dist, f"Stat{inst + 1}", f"Orient{inst + 1}"),
             )
     for col in ("Dist", "DistCM"):
         if not found and b.rec.timed("SONR", col):

@@ -44,6 +44,7 @@ import numpy as np
 
 from altfuse.errors import LogReadError
 from altfuse.model import (
+    DOWNWARD,
     Attitude,
     FlightLog,
     FloatArray,
@@ -70,8 +71,6 @@ TOPICS = (
     "vehicle_local_position_groundtruth",
     "vehicle_land_detected",
 )
-#: ``distance_sensor.orientation`` of a sensor looking down (MAV_SENSOR_ROTATION_PITCH_270).
-DOWNWARD = 25
 #: The standard atmosphere's height from pressure [m]: ``44330.77 (1 - (p / p0)^0.190263)``.
 SEA_LEVEL_PA = 101325.0
 _ISA_EXPONENT = 0.190263
@@ -315,12 +314,18 @@ def _read_baro(topics: _Topics, sensors: _Sensors) -> None:
 
 
 def _read_distance(topics: _Topics, sensors: _Sensors) -> None:
-    down = [
-        (k, d)
-        for k, d in enumerate(topics.of("distance_sensor"))
-        if "current_distance" in d
-        and ("orientation" not in d or (d["orientation"] == DOWNWARD).all())
-    ]
+    down = []
+    for k, d in enumerate(topics.of("distance_sensor")):
+        if "current_distance" not in d:
+            continue
+        if "orientation" in d and not (d["orientation"] == DOWNWARD).all():
+            facing = sorted(set(d["orientation"].tolist()))
+            sensors.dropped[f"distance_sensor[{k}]"] = (
+                f"distance_sensor[{k}].current_distance: orientation {facing}, not "
+                f"{DOWNWARD} (facing down): no height"
+            )
+            continue
+        down.append((k, d))
     for name, (k, d) in zip(_names("rangefinder"), down, strict=False):
         value = d["current_distance"].astype(np.float64)
         invalid: dict[str, np.ndarray] = {}
