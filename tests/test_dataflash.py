@@ -23,6 +23,7 @@ from pymavlink import mavutil
 from altfuse.errors import LogReadError
 from altfuse.io import read_log
 from altfuse.io.dataflash import _Records
+from altfuse.io.dataflash_writer import DataFlashWriter
 from altfuse.io.fastdf import index_file
 from altfuse.screen import GPS_CONVERGED_VACC_M, NOT_CONVERGED, not_converged
 from altfuse.simulate import simulate_flight, write_simulated_log
@@ -143,6 +144,26 @@ def test_a_rangefinder_not_facing_down_is_not_an_altitude(tmp_path: Path) -> Non
     assert flight.dropped_sources["rangefinder2"] == (
         f"RFND.Dist: no usable sample ({len(ahead)} Orient != 25 (not facing down))"
     )
+
+
+@pytest.mark.parametrize(
+    ("distance", "units"), [("DistCM", None), ("Dist", None), ("Dist", ("sm------", "CB------"))]
+)
+def test_a_planes_sonar_distance_is_read_in_metres(
+    tmp_path: Path, distance: str, units: tuple[str, str] | None
+) -> None:
+    """Plane logs its sonar's distance in centimetres, as a float: FMTU's multiplier says so
+    where logged; before FMTU (Plane 3.3's DistCM, then Dist) nothing did, and 5 m read 500."""
+    path = tmp_path / "sonar.bin"
+    with path.open("wb") as handle:
+        writer = DataFlashWriter(handle)
+        columns = f"TimeMS,{distance},Volt,BaroAlt,GSpd,Thr,Cnt,Corr"
+        writer.define("SONR", "IffffBBf", columns, *(units or (None, None)))
+        for k in range(50):
+            writer.write("SONR", 1000 + 100 * k, 500.0, 4.9, 0.0, 0.0, 0, 1, 1.0)
+    (sonar,) = read_log(path).sensors
+    assert sonar.kind == "rangefinder"
+    np.testing.assert_allclose(sonar.value, 5.0)
 
 
 def test_reading_a_damaged_log_prints_nothing(capfd: pytest.CaptureFixture[str]) -> None:

@@ -82,6 +82,10 @@ MAX_INSTANCES = 10
 BLENDED_GPS_INSTANCE = 2
 #: Format characters whose scale pymavlink applies itself.
 _SELF_SCALED = frozenset("cCeEL")
+#: Fields ArduPilot logged in centimetres as plain numbers before FMTU records said so: Plane's
+#: sonar distance (``rangefinder.distance_cm()``, a float: ``DistCM`` to 3.3, then ``Dist``;
+#: FMTU's multiplier B, 0.01, once logged). Read as metres, a 5 m height was 500.
+_CENTIMETRES_UNSAID = frozenset({("SONR", "DistCM"), ("SONR", "Dist")})
 #: Multiplier ids that mean "none" ('-'), "unknown" ('?') or 1 ('0').
 _NO_MULTIPLIER = frozenset("-?0")
 _LENGTH_UNITS_OK = frozenset({"m", "", "UNKNOWN"})
@@ -245,7 +249,9 @@ class _Records:
         if fmt.format[i] in _SELF_SCALED:
             return 1.0
         ids = self.fmtu.get(fmt.type_id)
-        if ids is None or i >= len(ids[1]) or ids[1][i] in _NO_MULTIPLIER:
+        if ids is None:
+            return 0.01 if (type_name, col) in _CENTIMETRES_UNSAID else 1.0
+        if i >= len(ids[1]) or ids[1][i] in _NO_MULTIPLIER:
             return 1.0
         return float(self.mult_lookup.get(ids[1][i], 1.0))
 
