@@ -22,7 +22,9 @@ from altfuse.io.dataflash_text import is_text_log
 from conftest import ROOT, SAMPLE_LOG, shared_log
 
 
-def as_text(log: Path, out: Path, digits: int | None = None, newline: str = "\n") -> Path:
+def as_text(
+    log: Path, out: Path, digits: int | None = None, newline: str = "\n", delimiter: str = ", "
+) -> Path:
     """``log`` written as a DataFlash text log, from pymavlink's decoding of it (scaled fields
     in their units, as Mission Planner writes them); floats to ``digits`` significant digits
     where given (Mission Planner's are rounded), all of them otherwise."""
@@ -32,7 +34,7 @@ def as_text(log: Path, out: Path, digits: int | None = None, newline: str = "\n"
             values = [getattr(message, column) for column in message.fmt.columns]
             if digits is not None:
                 values = [f"{v:.{digits}g}" if isinstance(v, float) else v for v in values]
-            lines.append(", ".join([message.get_type(), *map(str, values)]))
+            lines.append(delimiter.join([message.get_type(), *map(str, values)]))
     out.write_text(newline.join(lines) + newline, newline="")
     return out
 
@@ -95,6 +97,17 @@ def test_mission_planners_and_apm_planners_text_reads_within_its_rounding(tmp_pa
     assert read.size == binary.size == 1200
     assert np.nanmax(np.abs(read["fused_alt_m"] - binary["fused_alt_m"])) < 1e-5
     assert not read_log(text).damaged
+
+
+def test_a_text_log_delimited_by_bare_commas_reads_the_same(tmp_path: Path) -> None:
+    """pymavlink takes "," where the first FMT line has no ", "; a message's own commas stay
+    in it (the simulator's MSG holds ", ", and names the firmware)."""
+    text = as_text(SAMPLE_LOG, tmp_path / "mission.log", delimiter=",")
+    assert text.read_text().startswith("FMT,128,89,FMT,BBnNZ,Type,Length,Name,Format,Columns\n")
+    fuse(SAMPLE_LOG, tmp_path / "binary.csv")
+    fuse(text, tmp_path / "text.csv")
+    assert (tmp_path / "text.csv").read_bytes() == (tmp_path / "binary.csv").read_bytes()
+    assert read_log(text).firmware == read_log(SAMPLE_LOG).firmware
 
 
 def test_lines_that_hold_no_record_are_left_out_counted_and_said(tmp_path: Path) -> None:

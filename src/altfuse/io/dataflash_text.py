@@ -25,9 +25,10 @@ from typing import IO
 from altfuse.io.dataflash_writer import encoder, record_struct
 from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_TYPE, HEADER, SYNC
 
+#: The fields' delimiter: ", ", or "," where the first FMT line has no space (pymavlink's).
 DELIMITER = ", "
 #: A text log's first bytes hold an FMT line (pymavlink looks for "FMT," in the first 8,000).
-_FMT_LINE = re.compile(rb"(?:^|\n)FMT, *\d+, *\d+, ")
+_FMT_LINE = re.compile(rb"(?:^|\n)FMT, ?\d+, ?\d+, ?")
 
 
 def is_text_log(head: bytes) -> bool:
@@ -37,16 +38,18 @@ def is_text_log(head: bytes) -> bool:
 
 @dataclass(frozen=True)
 class _Type:
-    """A declared record type: its id, format, and how a line's fields become its record."""
+    """A declared record type: its name, id, format, and how a line's fields become its
+    record."""
 
+    name: str
     type_id: int
     format: str
     packer: struct.Struct
     encode: Callable[[Sequence[object]], list[object]]
 
 
-def _declared(type_id: int, fmt: str) -> _Type:
-    return _Type(type_id, fmt, record_struct(fmt), encoder(fmt))
+def _declared(name: str, type_id: int, fmt: str) -> _Type:
+    return _Type(name, type_id, fmt, record_struct(fmt), encoder(fmt))
 
 
 class BinaryFromText(io.RawIOBase):
@@ -55,7 +58,8 @@ class BinaryFromText(io.RawIOBase):
 
     def __init__(self, text: IO[bytes]) -> None:
         self.text = text
-        self.types: dict[str, _Type] = {"FMT": _declared(FMT_TYPE, FMT_FORMAT)}
+        self.types: dict[str, _Type] = {"FMT": _declared("FMT", FMT_TYPE, FMT_FORMAT)}
+        self.delimiter: str | None = None  # from the first FMT line
         self.line = self.records = self.left_out = 0
         self.first_left_out = ""
         self._pending = b""
@@ -87,28 +91,34 @@ class BinaryFromText(io.RawIOBase):
 
     def _record(self, line: bytes) -> bytes:
         """The binary record of one text line (empty where it holds none)."""
-        fields = line.rstrip(b"\r\n").decode("utf-8", "replace").split(DELIMITER)
-        if len(fields) < 2:  # a blank line, a banner ("ArduCopter V3.1.5"): no record
+        text = line.rstrip(b"\r\n").decode("utf-8", "replace")
+        if self.delimiter is None and text.startswith("FMT,"):  # as pymavlink: ", " else ","
+            self.delimiter = DELIMITER if text.startswith("FMT, ") else ","
+        delimiter = self.delimiter or DELIMITER
+        name, found, rest = text.partition(delimiter)
+        if not found:  # a blank line, a banner ("ArduCopter V3.1.5"): no record
             return b""
-        name, values = fields[0].strip(), [v.strip() for v in fields[1:]]
-        kind = self.types.get(name)
+        kind = self.types.get(name.strip())
         if kind is None:
-            return self._leave_out(f"{name!r} is not declared by an FMT line")
+            return self._leave_out(f"{name.strip()!r} is not declared by an FMT line")
         width = len(kind.format)
+        # a last field of text (FMT's columns, MSG's message) may hold the delimiter
+        last_is_text = kind.format.endswith(("n", "N", "Z"))
+        values = [v.strip() for v in rest.split(delimiter, width - 1 if last_is_text else -1)]
         if len(values) == width - 1 and values[-1].endswith(","):
             values = [*values[:-1], values[-1][:-1], ""]  # an empty last field, its space cut
         if values[:3] == ["128", "89", "FMT"] and values[4:] in ([], ["Type,Length,Name,Format"]):
             values = [*values[:4], FMT_COLUMNS]  # APM Planner leaves out FMT's own "Columns"
-        if len(values) > width and kind.format.endswith(("n", "N", "Z")):
-            values = [*values[: width - 1], DELIMITER.join(values[width - 1 :])]  # MSG's text
         if len(values) != width:
-            return self._leave_out(f"{len(values)} fields where {name} has {width}")
+            return self._leave_out(f"{len(values)} fields where {kind.name} has {width}")
         try:
             payload = (
-                self._declare(values) if name == "FMT" else kind.packer.pack(*kind.encode(values))
+                self._declare(values)
+                if kind.name == "FMT"
+                else kind.packer.pack(*kind.encode(values))
             )
         except (ValueError, struct.error, OverflowError, KeyError) as exc:
-            return self._leave_out(f"{name}: {exc}")
+            return self._leave_out(f"{kind.name}: {exc}")
         self.records += 1
         return SYNC + bytes([kind.type_id]) + payload
 
@@ -116,7 +126,7 @@ class BinaryFromText(io.RawIOBase):
         """The FMT record of an FMT line, its type declared for the lines after (its length
         the one its format packs to: the binary reader checks the two agree)."""
         type_id, _length, name, fmt, columns = values
-        declared = _declared(int(type_id), fmt)
+        declared = _declared(name, int(type_id), fmt)
         if not 0 <= declared.type_id <= 255:
             raise ValueError(f"type id {type_id} is not a byte")
         self.types[name] = declared
