@@ -26,6 +26,7 @@ from typing import Literal, get_args
 import numpy as np
 import numpy.typing as npt
 
+from altfuse.compiled import compiled
 from altfuse.errors import NoUsableSensorsError
 from altfuse.metrics import cumulative_integral
 from altfuse.model import FloatArray, SensorKind, Series, sensor_kind
@@ -287,11 +288,10 @@ def estimate_lag(series: Series, reference: Series) -> Lag:
     # interpolated between two samples averages their noise, one on a sample does not, and the
     # fit would favour the lags that fall between samples
     integral = cumulative_integral(rt, rv)
-    half = box / 2
     explained_at = np.empty(taus.size)
+    at = np.empty(t.size)
     for j, tau in enumerate(taus):
-        lo, hi = t - tau - half, t - tau + half
-        at = (np.interp(hi, rt, integral) - np.interp(lo, rt, integral)) / box
+        _box_means(t, float(tau), box, rt, integral, at)
         r = (at[k:] - at[:-k])[apart]
         rr = float(np.dot(r, r))
         explained_at[j] = float(np.dot(d, r)) ** 2 / (rr * energy) if rr > 0 else 0.0
@@ -310,6 +310,55 @@ def estimate_lag(series: Series, reference: Series) -> Lag:
     std = _lag_std(energy * (1.0 - explained_at[best - 1 : best + 2]), d.size, k)
     how = f"changes matched to {reference.name}'s ({explained:.1%} explained, +-{std:.3f} s)"
     return Lag(series.name, reference.name, tau, explained, how, std)
+
+
+def _box_means(
+    t: FloatArray, tau: float, box: float, rt: FloatArray, integral: FloatArray, out: FloatArray
+) -> None:
+    """``out``: the reference's mean over ``box`` around each of the times ``t - tau``, from
+    its running ``integral`` at its times ``rt`` (both sorted, distinct):
+    ``(np.interp(t - tau + box/2, rt, integral) - np.interp(t - tau - box/2, rt, integral)) /
+    box`` to the bit. Compiled (:func:`_walked_box_means`), where numpy's interpolation gives
+    a number at its first try; numpy's own where it does not (a NaN: it tries again)."""
+    _walked_box_means(t, tau, box, rt, integral, out)
+    again = np.isnan(out)
+    if again.any():
+        shifted = t[again] - tau
+        half = box / 2
+        out[again] = (
+            np.interp(shifted + half, rt, integral) - np.interp(shifted - half, rt, integral)
+        ) / box
+
+
+@compiled
+def _walked_box_means(
+    t: FloatArray, tau: float, box: float, rt: FloatArray, integral: FloatArray, out: FloatArray
+) -> None:
+    """:func:`_box_means`, each end's interval found by walking on from the last time's
+    instead of numpy's search (151 lags over a 300 MB log's 132 k GPS samples: 1.76 s with
+    numpy), a NaN where numpy would try again (a check of it here made the loop 6x slower)."""
+    half = box / 2
+    lo = hi = 0
+    for i in range(t.size):
+        shifted = t[i] - tau
+        low, lo = _interpolated(shifted - half, lo, rt, integral)
+        high, hi = _interpolated(shifted + half, hi, rt, integral)
+        out[i] = (high - low) / box
+
+
+@compiled
+def _interpolated(x: float, j: int, rt: FloatArray, integral: FloatArray) -> tuple[float, int]:
+    """numpy's ``interp(x, rt, integral)`` at its first try (its ends held, a knot's own
+    value), the interval ``rt[j] <= x < rt[j + 1]`` searched on from ``j``; and ``j``."""
+    last = rt.size - 1
+    while j < last and rt[j + 1] <= x:
+        j += 1
+    if x < rt[0]:
+        return integral[0], j
+    if j == last or rt[j] == x:
+        return integral[j], j
+    slope = (integral[j + 1] - integral[j]) / (rt[j + 1] - rt[j])
+    return slope * (x - rt[j]) + integral[j], j
 
 
 def _lag_std(rss: FloatArray, n: int, k: int) -> float:
