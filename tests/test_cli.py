@@ -114,6 +114,43 @@ def test_bad_files(tmp_path: Path, case: str, fragment: str) -> None:
     assert not (tmp_path / "out.meta.json").exists()
 
 
+def _refused(monkeypatch: pytest.MonkeyPatch, method: str, where: Path) -> None:
+    """``Path.<method>`` on ``where`` refused by the system, as for a user without the right
+    (the tests run as root, whom chmod does not stop)."""
+    real = getattr(Path, method)
+
+    def refuse(self: Path, *args: object, **kwargs: object) -> object:
+        if self == where:
+            raise PermissionError(13, "Permission denied", str(self))
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, method, refuse)
+
+
+def test_a_log_in_a_folder_that_may_not_be_entered_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``altfuse fuse /root/x.bin`` run by another user: its stat was refused, an internal
+    error (exit 3) before."""
+    log = tmp_path / "closed" / "x.bin"
+    _refused(monkeypatch, "stat", log)
+    for command in (["fuse", log, "-o", tmp_path / "out.csv"], ["info", log]):
+        assert_one_line_error(run(*command), 1, f"{log}: cannot read (Permission denied)")
+    assert not (tmp_path / "out.csv").exists()
+
+
+def test_a_batch_whose_output_folder_may_not_be_made_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The system's refusals altfuse does not foresee (an output folder it may not create, a
+    full disk) name the path and the reason, exit 1; an internal error (exit 3) before."""
+    out = tmp_path / "results"
+    _refused(monkeypatch, "mkdir", out)
+    result = run("batch", SAMPLE_LOG, "-o", out)
+    assert_one_line_error(result, 1, f"{out}: Permission denied")
+    assert not out.exists()
+
+
 @pytest.mark.parametrize(
     ("args", "fragment"),
     [

@@ -25,7 +25,7 @@ from typing import Any, NoReturn
 import click
 
 from altfuse import __version__
-from altfuse.errors import AltfuseError, out_of_memory
+from altfuse.errors import AltfuseError, out_of_memory, system_refused
 from altfuse.params import InvalidParameter
 from altfuse.signals import (
     ENDING,
@@ -40,7 +40,8 @@ EXIT_BUG = 3
 #: Every command's exit codes, at the end of its help (batch adds its own 4).
 EXIT_CODES = (
     "Exit codes: 0 done; 1 the log cannot be processed (missing, damaged beyond reading, too few "
-    "altitude sources), an output cannot be written or memory runs out; 2 a usage or parameter "
+    "altitude sources), an output cannot be written, the system refuses a file or memory runs "
+    "out; 2 a usage or parameter "
     "error; 3 a bug (--debug shows it); 130 interrupted, 143 terminated."
 )
 #: The group's options, taken after the command too (``altfuse fuse in.bin -o x.csv -v``).
@@ -146,20 +147,30 @@ class _Cli(click.Group):
             _fail_signalled(exc)
         except click.ClickException as exc:
             _fail(exc.format_message().replace("\n", " "), exc.exit_code)
-        except InvalidParameter as exc:  # the library names the parameter; here, its flag
-            from altfuse.commands import flag_for
-
-            _fail(f"{flag_for(exc.name)} {exc.problem}", exc.exit_code)
-        except AltfuseError as exc:
-            _fail(str(exc), exc.exit_code)
-        except MemoryError as exc:
-            _fail(out_of_memory(exc), 1)
         except Exception as exc:
-            _fail_signalled(interruption(exc))
-            if debug:
-                traceback.print_exc()
-            _fail(f"internal error: {type(exc).__name__}: {exc} (rerun with --debug)", EXIT_BUG)
+            _fail_for(exc, debug)
         sys.exit(code if isinstance(code, int) else 0)
+
+
+def _fail_for(exc: Exception, debug: bool) -> NoReturn:
+    """End the run that ``exc`` ended, in one line: what altfuse found wrong (the library
+    names a parameter, the command line its flag), memory or a file the system refused (not
+    bugs), a signal's exit, or an internal error (a bug: exit 3, its traceback with
+    ``--debug``)."""
+    if isinstance(exc, InvalidParameter):
+        from altfuse.commands import flag_for
+
+        _fail(f"{flag_for(exc.name)} {exc.problem}", exc.exit_code)
+    if isinstance(exc, AltfuseError):
+        _fail(str(exc), exc.exit_code)
+    if isinstance(exc, MemoryError):
+        _fail(out_of_memory(exc), 1)
+    _fail_signalled(interruption(exc))
+    if debug:
+        traceback.print_exc()
+    if isinstance(exc, OSError):
+        _fail(system_refused(exc), 1)
+    _fail(f"internal error: {type(exc).__name__}: {exc} (rerun with --debug)", EXIT_BUG)
 
 
 def _global_flags_first(argv: list[str]) -> list[str]:

@@ -42,3 +42,14 @@ def out_of_memory(exc: MemoryError) -> str:
         f"out of memory ({exc or 'no detail'}); less at once needs less: a lower --rate, fewer "
         "--jobs, a shorter --duration"
     )
+
+
+def system_refused(exc: OSError) -> str:
+    """What a run says where the system refused it a file or folder that altfuse's own checks
+    did not foresee (a batch's output folder it may not create, an input folder it may not
+    list, a full disk): the path and the system's reason, not a bug (``internal error``, exit
+    3, as it said before)."""
+    if exc.filename is None:
+        return f"the system refused: {exc.strerror or exc}"
+    paths = f"{exc.filename}" + (f" -> {exc.filename2}" if exc.filename2 is not None else "")
+    return f"{paths}: {exc.strerror or exc}"

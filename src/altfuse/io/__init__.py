@@ -99,8 +99,12 @@ def _kind(path: Path, head: bytes) -> Kind:
 
 def _head(path: Path) -> bytes:
     """The first bytes of the file at ``path``, by which :func:`read_log` picks its reader."""
-    if not path.exists():
-        raise LogReadError(f"{path}: no such file")
+    try:
+        path.stat()
+    except (FileNotFoundError, ValueError):  # ValueError: a NUL in the name
+        raise LogReadError(f"{path}: no such file") from None
+    except OSError as exc:  # a folder on the way that may not be entered
+        raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
     if path.is_dir():
         raise LogReadError(
             f"{path}: a folder, not a log; for its logs: altfuse batch {path} -o OUT"
