@@ -131,6 +131,28 @@ def test_finding_logs(tmp_path: Path) -> None:
         run_batch([tmp_path / "x"], tmp_path / "out", pattern="*.ulg")
 
 
+def test_a_folder_that_cannot_be_listed_is_said(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A subfolder the user may not list (another user's flights): its logs are not in the
+    batch, and a warning says so (rglob passed over it in silence)."""
+    for name in ("open/a.bin", "closed/b.bin"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_bytes(b"x")
+    real = os.scandir
+
+    def scandir(path: str | Path) -> object:
+        if Path(path) == tmp_path / "closed":
+            raise PermissionError(13, "Permission denied", str(path))
+        return real(path)
+
+    monkeypatch.setattr(os, "scandir", scandir)
+    assert [str(rel) for _, rel in find_logs([tmp_path])] == ["open/a.bin"]
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{tmp_path / 'closed'}: cannot list (Permission denied): its logs are not in this batch"
+    ]
+
+
 def test_nonsense_batch_options(tmp_path: Path) -> None:
     for args, fragment in ((["--jobs", "0"], "--jobs"), (["--rate", "0"], "--rate")):
         result = CliRunner().invoke(cli, ["batch", str(SAMPLES), "-o", str(tmp_path), *args])

@@ -24,6 +24,7 @@ import ctypes
 import fcntl
 import fnmatch
 import json
+import logging
 import multiprocessing
 import os
 import signal
@@ -203,9 +204,8 @@ def find_logs(
         elif root.is_dir():
             candidates = (
                 (p, p.relative_to(root))
-                for p in sorted(root.rglob("*"))
-                if p.is_file()
-                and not p.name.startswith(".")
+                for p in _files_under(root)
+                if not p.name.startswith(".")
                 and any(fnmatch.fnmatch(p.name.lower(), each) for each in patterns)
             )
         else:
@@ -221,6 +221,22 @@ def find_logs(
                 )
             found[relative] = log
     return [(log, relative) for relative, log in sorted(found.items())]
+
+
+def _files_under(root: Path) -> list[Path]:
+    """The files under ``root`` (its links to folders not followed), sorted; a folder that
+    cannot be listed is said, as a warning: its logs are not in the batch (``rglob`` passed
+    over it in silence)."""
+    found: list[Path] = []
+    for folder, _, names in os.walk(root, onerror=_unlisted):
+        found += [p for p in (Path(folder, n) for n in names) if p.is_file()]
+    return sorted(found)
+
+
+def _unlisted(exc: OSError) -> None:
+    logging.getLogger("altfuse").warning(
+        "%s: cannot list (%s): its logs are not in this batch", exc.filename, exc.strerror
+    )
 
 
 def _patterns(pattern: str | Sequence[str]) -> tuple[str, ...]:
