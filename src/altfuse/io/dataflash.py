@@ -346,10 +346,12 @@ def _add_instances(  # noqa: PLR0913 (what each instance's source is, as add() t
     not_sensors: Mapping[int, str] | None = None,
 ) -> None:
     """Add one series per instance of ``type_name.col``, named ``kind``, ``kind2``, ...; the
-    instances in ``not_sensors`` left out, for the reason given."""
+    instances numbered in ``instance_field`` that ``not_sensors`` names left out, for the
+    reason it gives."""
+    left_out = (not_sensors or {}) if b.rec.has(type_name, instance_field) else {}
     for inst, sel in _instances(b.rec, type_name, instance_field, default):
-        if inst in (not_sensors or {}) and b.rec.has(type_name, instance_field):
-            b.dropped_sources[_instance_name(kind, inst)] = (not_sensors or {})[inst]
+        if inst in left_out:
+            b.dropped_sources[_instance_name(kind, inst)] = left_out[inst]
             continue
         b.add(
             name=_instance_name(kind, inst),
