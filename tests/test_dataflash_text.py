@@ -150,6 +150,18 @@ def test_a_compressed_or_piped_text_log_reads_as_the_text(tmp_path: Path) -> Non
     assert (tmp_path / "piped.csv").read_bytes() == (tmp_path / "text.csv").read_bytes()
 
 
+def test_a_text_log_after_a_long_banner_is_known(tmp_path: Path) -> None:
+    """pymavlink looks for the first FMT line in 8,000 characters (altfuse looked in 4,096)
+    and starts the log there: the lines before it are no damage."""
+    text = as_text(SAMPLE_LOG, tmp_path / "mission.log")
+    banner = "".join(f"Init ArduCopter V4.0.0, step {k}\n" for k in range(200))
+    assert 4096 < len(banner) < 7000
+    text.write_text(banner + text.read_text())
+    fuse(SAMPLE_LOG, tmp_path / "binary.csv")
+    assert "left out" not in fuse(text, tmp_path / "text.csv")
+    assert (tmp_path / "text.csv").read_bytes() == (tmp_path / "binary.csv").read_bytes()
+
+
 def test_text_that_is_no_log_is_refused_in_one_line(tmp_path: Path) -> None:
     assert is_text_log(b"FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns\n")
     assert is_text_log(b"ArduCopter V3.1.5\r\nFMT, 129, 23, PARM, QNf, TimeUS,Name,Value\r\n")

@@ -20,7 +20,9 @@ from altfuse.io.framing import FMT_HEADER
 from altfuse.model import FlightLog
 
 ULOG_MAGIC = b"ULog\x01\x12\x35"
-_SNIFF_BYTES = 4096
+#: The first bytes that tell what a log is (:func:`_kind`): as many as pymavlink reads to tell a
+#: text log (an FMT line in its first 8,000 characters: old logs open with banner lines).
+_SNIFF_BYTES = 8192
 #: What a log is by its first bytes (:func:`_kind`): compressed, as fleets archive logs
 #: (``flight.bin.gz``: decompressed into a temporary file, read from it, and described as the
 #: file given, its name, size and sha256, what a later ``--skip-existing`` hashes), a ULog, a

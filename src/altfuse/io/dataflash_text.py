@@ -92,11 +92,13 @@ class BinaryFromText(io.RawIOBase):
     def _record(self, line: bytes) -> bytes:
         """The binary record of one text line (empty where it holds none)."""
         text = line.rstrip(b"\r\n").decode("utf-8", "replace")
-        if self.delimiter is None and text.startswith("FMT,"):  # as pymavlink: ", " else ","
+        if self.delimiter is None:  # as pymavlink: the log starts at its first FMT line
+            if not text.startswith("FMT,"):
+                return b""  # a banner before it
             self.delimiter = DELIMITER if text.startswith("FMT, ") else ","
-        delimiter = self.delimiter or DELIMITER
+        delimiter = self.delimiter
         name, found, rest = text.partition(delimiter)
-        if not found:  # a blank line, a banner ("ArduCopter V3.1.5"): no record
+        if not found:  # a blank line, a line of free text: no record
             return b""
         kind = self.types.get(name.strip())
         if kind is None:
