@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gzip
 import hashlib
+import json
 import tempfile
 from functools import cache
 from pathlib import Path
@@ -133,6 +134,9 @@ def test_lines_that_hold_no_record_are_left_out_counted_and_said(tmp_path: Path)
     assert "4 left out (the first: line 303: 'XYZ' is not declared by an FMT line)" in said
     stderr = fuse(damaged, tmp_path / "damaged.csv")
     assert "4 left out" in stderr
+    info = json.loads(CliRunner().invoke(cli, ["info", str(damaged), "--json"]).stdout)
+    assert info["reader"].startswith("DataFlash text, converted to binary")
+    assert info["damaged"] == [said]
 
 
 def test_a_compressed_or_piped_text_log_reads_as_the_text(tmp_path: Path) -> None:

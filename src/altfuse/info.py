@@ -88,7 +88,9 @@ def describe(raw: FlightLog) -> dict[str, Any]:
         "attitude": None
         if flight.attitude is None
         else {"source": flight.attitude.source, "samples": int(flight.attitude.t.size)},
+        "reader": flight.reader,
         "skipped_bytes": flight.skipped_bytes,
+        "damaged": list(flight.damaged),
         "samples_dropped_total": sum(sum(s.dropped.values()) for s in flight.sensors),
         "implausible_samples": implausible_count(flight),
         "record_counts": flight.record_counts,
