@@ -234,6 +234,21 @@ def test_ardusub_baro_instances() -> None:
     assert [s.name for s in flight.sensors] == ["baro", "baro2"]
 
 
+def test_an_ardusub_log_without_its_firmware_text_is_known_by_its_parameters(
+    tmp_path: Path,
+) -> None:
+    """Its MSG and VER types renamed (as if its head were cut): still a Sub (SURFACE_DEPTH),
+    whose BARO is water depth; it was an aircraft of unknown kind."""
+    data = shared_log("ardupilot/ardusubtools_small.BIN").read_bytes()
+    for name, other in ((b"MSG", b"MSX"), (b"VER", b"VEX")):  # in their FMT records
+        fmt = re.compile(rb"(\xa3\x95\x80..)" + name + rb"\x00", re.DOTALL)
+        data = fmt.sub(lambda m, other=other: m.group(1) + other + b"\x00", data)
+    path = tmp_path / "sub.bin"
+    path.write_bytes(data)
+    flight = read_log(path)
+    assert (flight.vehicle, flight.firmware) == ("sub", "unknown")
+
+
 @pytest.mark.parametrize(
     ("content", "message"),
     [

@@ -91,6 +91,9 @@ _NO_MULTIPLIER = frozenset("-?0")
 _LENGTH_UNITS_OK = frozenset({"m", "", "UNKNOWN"})
 _GROUND = "ground below the vehicle"
 
+#: A parameter only ArduSub has (its water surface's depth): a Sub log whose firmware text
+#: (MSG, VER) is gone, its head cut, is still known for one (its BARO is water depth).
+_SUB_ONLY_PARAMETER = "SURFACE_DEPTH"
 _FIRMWARE_RE = re.compile(
     r"\b(ArduCopter|APM:Copter|ArduPlane|APM:Plane|ArduRover|APM:Rover|ArduSub|"
     r"AntennaTracker|Blimp|ArduHeli)\s+V?(\d+\.\d+[\w.\-]*)"
@@ -727,6 +730,9 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     rec.done("RFND", "SONR")
     _read_ctun_fallbacks(b, have_baro, have_rangefinder)
     vehicle, firmware = _firmware(rec)
+    params = _params(rec)
+    if vehicle == "unknown" and _SUB_ONLY_PARAMETER in params:
+        vehicle = "sub"
     # each type's records go once read: the largest, IMU's, are converted with less beside them
     imu = _read_imu(rec)
     rec.done("IMU")
@@ -761,7 +767,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
         skipped_bytes=skipped,
         notes=tuple(b.notes),
         dropped_sources=b.dropped_sources,
-        params=_params(rec),
+        params=params,
         ground_speed=speed,
         ground_course=course,
         vertical_velocity=climb,
