@@ -89,7 +89,7 @@ def _cache_roots() -> Iterator[Path]:
     home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     if os.path.isabs(home):  # "~" unexpanded: no home known
         yield Path(home) / "altfuse"
-    shared = Path(tempfile.gettempdir()) / f"altfuse-{_user()}"
+    shared = Path(tempfile.gettempdir()) / f"altfuse-{_uid()}"
     with contextlib.suppress(OSError):
         shared.mkdir(mode=0o700, exist_ok=True)
         mine = shared.lstat()
@@ -111,11 +111,9 @@ def _writable(directory: Path) -> bool:
 
 
 def _uid() -> int:
+    """The user's id (0 where the system has none: Windows, whose temporary folder is the
+    user's own)."""
     return os.getuid() if hasattr(os, "getuid") else 0
-
-
-def _user() -> str:
-    return str(os.getuid()) if hasattr(os, "getuid") else os.environ.get("USERNAME", "user")
 
 
 @contextlib.contextmanager

@@ -6,9 +6,10 @@ import contextlib
 import hashlib
 import io
 import lzma
+import stat
 import sys
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
@@ -102,16 +103,16 @@ def _kind(path: Path, head: bytes) -> Kind:
 def _head(path: Path) -> bytes:
     """The first bytes of the file at ``path``, by which :func:`read_log` picks its reader."""
     try:
-        path.stat()
+        mode = path.stat().st_mode
     except (FileNotFoundError, ValueError):  # ValueError: a NUL in the name
         raise LogReadError(f"{path}: no such file") from None
     except OSError as exc:  # a folder on the way that may not be entered
         raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
-    if path.is_dir():
+    if stat.S_ISDIR(mode):
         raise LogReadError(
             f"{path}: a folder, not a log; for its logs: altfuse batch {path} -o OUT"
         )
-    if not path.is_file():
+    if not stat.S_ISREG(mode):
         raise LogReadError(f"{path}: not a file")
     try:
         with path.open("rb") as handle:
@@ -146,42 +147,50 @@ class _Hashed(io.RawIOBase):
 
 
 def _read_compressed(path: Path, packed: Compression) -> FlightLog:
-    """The log compressed in ``path``, decompressed and read (:func:`_read_copied`);
-    described as the file given (its size and sha256, taken as it is decompressed)."""
-    try:
-        with path.open("rb") as raw:
-            hashed = _Hashed(raw)
-            with packed.open(cast(IO[bytes], hashed), "rb") as stream:
-                flight = _read_copied(path, stream, f"its {packed.name} compression")
-            hashed.drain()
-    except OSError as exc:
-        raise LogReadError(f"{path}: cannot decompress ({exc.strerror or exc})") from exc
-    return replace(flight, sha256=hashed.digest.hexdigest(), size_bytes=hashed.size)
+    """The log compressed in ``path``, decompressed and read (:func:`_read_through`)."""
+    return _read_through(
+        path, lambda raw: packed.open(raw, "rb"), f"its {packed.name} compression", "decompress"
+    )
 
 
 def _read_text(path: Path) -> FlightLog:
     """The DataFlash text log ``path``, each line converted into its binary record as it is
     read (:class:`~altfuse.io.dataflash_text.BinaryFromText`), and the binary log read
-    (:func:`_read_copied`); described as the file given (its size and sha256, taken as it is
-    converted). Lines left out are damage, said as a binary log's skipped bytes are."""
+    (:func:`_read_through`). Lines left out are damage, said as a binary log's skipped bytes
+    are."""
     from altfuse.io.dataflash_text import BinaryFromText
 
+    converted: list[BinaryFromText] = []
+
+    def convert(raw: IO[bytes]) -> io.BufferedIOBase:
+        converted.append(BinaryFromText(raw))
+        return io.BufferedReader(converted[0])
+
+    flight = _read_through(path, convert, "its DataFlash text", "read")
+    said = converted[0].note()
+    return replace(
+        flight,
+        notes=(*flight.notes, said),
+        damaged=(*flight.damaged, said) if converted[0].left_out else flight.damaged,
+        reader=f"DataFlash text, converted to binary (altfuse.io.dataflash_text); {flight.reader}",
+    )
+
+
+def _read_through(
+    path: Path, through: Callable[[IO[bytes]], io.BufferedIOBase], source: str, verb: str
+) -> FlightLog:
+    """The log that the file ``path`` gives ``through`` a decoder (a decompression, the text
+    form's conversion), read from a copy (:func:`_read_copied`); described as the file given,
+    its size and sha256 taken as it is decoded (the file is read once)."""
     try:
         with path.open("rb") as raw:
             hashed = _Hashed(raw)
-            converted = BinaryFromText(io.BufferedReader(hashed))
-            flight = _read_copied(path, io.BufferedReader(converted), "its DataFlash text")
+            with through(cast(IO[bytes], io.BufferedReader(hashed))) as stream:
+                flight = _read_copied(path, stream, source)
             hashed.drain()
     except OSError as exc:
-        raise LogReadError(f"{path}: cannot read ({exc.strerror or exc})") from exc
-    return replace(
-        flight,
-        sha256=hashed.digest.hexdigest(),
-        size_bytes=hashed.size,
-        notes=(*flight.notes, converted.note()),
-        damaged=(*flight.damaged, converted.note()) if converted.left_out else flight.damaged,
-        reader=f"DataFlash text, converted to binary (altfuse.io.dataflash_text); {flight.reader}",
-    )
+        raise LogReadError(f"{path}: cannot {verb} ({exc.strerror or exc})") from exc
+    return replace(flight, sha256=hashed.digest.hexdigest(), size_bytes=hashed.size)
 
 
 def _read_piped(path: Path) -> FlightLog:

@@ -7,7 +7,8 @@ layout (``FMT, 130, 45, GPS, QBIHBcLLeffffB, TimeUS,Status,...``). pymavlink's
 ``DFReader_text`` is the authority: the same delimiter, scaled fields (``c``, ``e``, ``L``, ...)
 written in their units, a line whose type is undeclared or whose fields are too few left out.
 :class:`BinaryFromText` packs each line into its binary record as
-:class:`~altfuse.io.dataflash_writer.DataFlashWriter` does, so that one reader
+:class:`~altfuse.io.dataflash_writer.DataFlashWriter` does (one
+:class:`~altfuse.io.dataflash_writer.RecordType`), so that one reader
 (:mod:`altfuse.io.dataflash`) reads both forms, with the same checks and the same damage
 accounting; a line that does not pack (a field that is no number, a value out of its field's
 range, a partial last line) is left out and counted.
@@ -18,12 +19,10 @@ from __future__ import annotations
 import io
 import re
 import struct
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import IO
 
-from altfuse.io.dataflash_writer import encoder, record_struct
-from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_TYPE, HEADER, SYNC
+from altfuse.io.dataflash_writer import RecordType
+from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_TYPE
 
 #: The fields' delimiter: ", ", or "," where the first FMT line has no space (pymavlink's).
 DELIMITER = ", "
@@ -36,29 +35,13 @@ def is_text_log(head: bytes) -> bool:
     return b"\0" not in head and _FMT_LINE.search(head) is not None
 
 
-@dataclass(frozen=True)
-class _Type:
-    """A declared record type: its name, id, format, and how a line's fields become its
-    record."""
-
-    name: str
-    type_id: int
-    format: str
-    packer: struct.Struct
-    encode: Callable[[Sequence[object]], list[object]]
-
-
-def _declared(name: str, type_id: int, fmt: str) -> _Type:
-    return _Type(name, type_id, fmt, record_struct(fmt), encoder(fmt))
-
-
 class BinaryFromText(io.RawIOBase):
     """The binary DataFlash log whose records ``text`` (a text log's bytes) holds, line by
     line, as a stream; what was converted and left out counted as it goes (:meth:`note`)."""
 
     def __init__(self, text: IO[bytes]) -> None:
         self.text = text
-        self.types: dict[str, _Type] = {"FMT": _declared("FMT", FMT_TYPE, FMT_FORMAT)}
+        self.types = {"FMT": RecordType("FMT", FMT_TYPE, FMT_FORMAT)}
         self.delimiter: str | None = None  # from the first FMT line
         self.line = self.records = self.left_out = 0
         self.first_left_out = ""
@@ -114,27 +97,21 @@ class BinaryFromText(io.RawIOBase):
         if len(values) != width:
             return self._leave_out(f"{len(values)} fields where {kind.name} has {width}")
         try:
-            payload = (
-                self._declare(values)
-                if kind.name == "FMT"
-                else kind.packer.pack(*kind.encode(values))
-            )
+            record = self._declare(values) if kind.name == "FMT" else kind.record(values)
         except (ValueError, struct.error, OverflowError, KeyError) as exc:
             return self._leave_out(f"{kind.name}: {exc}")
         self.records += 1
-        return SYNC + bytes([kind.type_id]) + payload
+        return record
 
     def _declare(self, values: list[str]) -> bytes:
         """The FMT record of an FMT line, its type declared for the lines after (its length
         the one its format packs to: the binary reader checks the two agree)."""
         type_id, _length, name, fmt, columns = values
-        declared = _declared(name, int(type_id), fmt)
+        declared = RecordType(name, int(type_id), fmt)
         if not 0 <= declared.type_id <= 255:
             raise ValueError(f"type id {type_id} is not a byte")
         self.types[name] = declared
-        fmt_type = self.types["FMT"]
-        length = HEADER + declared.packer.size
-        return fmt_type.packer.pack(*fmt_type.encode([type_id, str(length), name, fmt, columns]))
+        return self.types["FMT"].record([type_id, str(declared.length), name, fmt, columns])
 
     def _leave_out(self, why: str) -> bytes:
         self.left_out += 1

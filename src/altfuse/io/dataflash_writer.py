@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any, BinaryIO
 
 from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_TYPE, FORMAT_TO_STRUCT, HEADER, SYNC
@@ -35,17 +36,33 @@ UNITS = {
 MULTIPLIERS = {"-": 0.0, "?": 1.0, "0": 1.0, "B": 1e-2, "C": 1e-3, "F": 1e-6, "G": 1e-7}
 
 
-def record_struct(fmt: str) -> struct.Struct:
-    """The layout of a record's payload of format ``fmt`` (little-endian, packed)."""
-    return struct.Struct("<" + "".join(FORMAT_TO_STRUCT[c][0] for c in fmt))
+@dataclass(frozen=True)
+class RecordType:
+    """A declared record type: its name, id and format, and how its fields, numbers in their
+    units or their text, become its binary record (scaled fields divided by their scale and
+    rounded, text encoded; pymavlink's layout). A format character pymavlink does not know:
+    KeyError."""
 
+    name: str
+    type_id: int
+    format: str
+    packer: struct.Struct = field(init=False, repr=False)
+    converters: tuple[Callable[[Any], object], ...] = field(init=False, repr=False)
 
-def encoder(fmt: str) -> Callable[[Sequence[object]], list[object]]:
-    """What turns the fields of a record of format ``fmt``, numbers in their units or their
-    text, into what :func:`record_struct` packs: scaled fields divided by their scale and
-    rounded, text encoded. A character pymavlink does not know: KeyError."""
-    converters = [_converter(c) for c in fmt]
-    return lambda values: [f(v) for f, v in zip(converters, values, strict=True)]
+    def __post_init__(self) -> None:
+        packer = struct.Struct("<" + "".join(FORMAT_TO_STRUCT[c][0] for c in self.format))
+        object.__setattr__(self, "packer", packer)
+        object.__setattr__(self, "converters", tuple(_converter(c) for c in self.format))
+
+    @property
+    def length(self) -> int:
+        """A record's length, its header included: what its FMT record declares."""
+        return HEADER + self.packer.size
+
+    def record(self, values: Sequence[object]) -> bytes:
+        """The record of ``values``, one per field."""
+        fields = [f(v) for f, v in zip(self.converters, values, strict=True)]
+        return SYNC + bytes([self.type_id]) + self.packer.pack(*fields)
 
 
 def _converter(char: str) -> Callable[[Any], object]:
@@ -81,9 +98,7 @@ class DataFlashWriter:
     def __init__(self, stream: BinaryIO) -> None:
         self.stream = stream
         self.records = 0
-        self._types: dict[
-            str, tuple[int, Callable[[Sequence[object]], list[object]], struct.Struct]
-        ] = {}
+        self._types: dict[str, RecordType] = {}
         self._next_type = 129
         self._declare("FMT", FMT_TYPE, FMT_FORMAT, FMT_COLUMNS)
         self.define("UNIT", "QbZ", "TimeUS,Id,Label")
@@ -95,10 +110,8 @@ class DataFlashWriter:
             self.write("MULT", 0, ord(mid), mult)
 
     def _declare(self, name: str, type_id: int, fmt: str, columns: str) -> None:
-        packer = record_struct(fmt)
-        self._types[name] = (type_id, encoder(fmt), packer)
-        length = HEADER + packer.size
-        self.write("FMT", type_id, length, name, fmt, columns)
+        declared = self._types[name] = RecordType(name, type_id, fmt)
+        self.write("FMT", type_id, declared.length, name, fmt, columns)
 
     def define(
         self, name: str, fmt: str, columns: str, units: str | None = None, mults: str | None = None
@@ -114,6 +127,5 @@ class DataFlashWriter:
 
     def write(self, name: str, *values: object) -> None:
         """Write one record of type ``name``; scaled fields take their value in the real unit."""
-        type_id, encode, packer = self._types[name]
-        self.stream.write(SYNC + bytes([type_id]) + packer.pack(*encode(values)))
+        self.stream.write(self._types[name].record(values))
         self.records += 1
