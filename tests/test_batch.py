@@ -153,6 +153,33 @@ def test_a_folder_that_cannot_be_listed_is_said(
     ]
 
 
+def test_a_batch_that_finds_no_log_lists_its_folders_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Its hint counts the text logs in the listing it chose from: an unlistable folder is
+    warned of once, not once more for the hint."""
+    for name in ("open/a.log", "closed/b.bin"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_bytes(b"x")
+    real = os.scandir
+    listed: list[Path] = []
+
+    def scandir(path: str | Path) -> object:
+        listed.append(Path(path))
+        if Path(path) == tmp_path / "closed":
+            raise PermissionError(13, "Permission denied", str(path))
+        return real(path)
+
+    monkeypatch.setattr(os, "scandir", scandir)
+    with pytest.raises(LogReadError, match=r"1 \*\.log there: --pattern"):
+        run_batch([tmp_path], tmp_path / "out")
+    assert sorted(listed) == [tmp_path, tmp_path / "closed", tmp_path / "open"]
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{tmp_path / 'closed'}: cannot list (Permission denied): its logs are not in this batch"
+    ]
+    assert not (tmp_path / "out").exists()
+
+
 def test_nonsense_batch_options(tmp_path: Path) -> None:
     for args, fragment in ((["--jobs", "0"], "--jobs"), (["--rate", "0"], "--rate")):
         result = CliRunner().invoke(cli, ["batch", str(SAMPLES), "-o", str(tmp_path), *args])

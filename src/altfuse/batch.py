@@ -194,32 +194,52 @@ def find_logs(
     """(log, path relative to its input folder) for every file matching ``pattern`` (or any of
     several), without regard to case, under ``paths`` (folders searched recursively; files
     taken as given)."""
-    patterns = [p.lower() for p in _patterns(pattern)]
-    found: dict[Path, Path] = {}
-    seen: set[Path] = set()
+    return _matching(_listing(paths), pattern)
+
+
+#: A file a batch may take: the file, its path relative to its input folder, and whether it
+#: was named itself (taken whatever its name).
+Listed = tuple[Path, Path, bool]
+
+
+def _listing(paths: Sequence[str | Path]) -> list[Listed]:
+    """Every file named in ``paths`` and every file not hidden under its folders, listed once
+    (:func:`_files_under`): the logs are chosen from it, and a batch that chose none counts
+    the text logs in it for its hint."""
+    listed: list[Listed] = []
     for raw in paths:
         root = Path(raw)
         if root.is_file():
-            candidates: Iterable[tuple[Path, Path]] = [(root, Path(root.name))]
+            listed.append((root, Path(root.name), True))
         elif root.is_dir():
-            candidates = (
-                (p, p.relative_to(root))
+            listed += [
+                (p, p.relative_to(root), False)
                 for p in _files_under(root)
                 if not p.name.startswith(".")
-                and any(fnmatch.fnmatch(p.name.lower(), each) for each in patterns)
-            )
+            ]
         else:
             raise LogReadError(f"{root}: no such file or folder")
-        for log, relative in candidates:
-            if log.resolve() in seen:
-                continue
-            seen.add(log.resolve())
-            if relative in found:
-                raise ParameterError(
-                    f"{found[relative]} and {log} would write the same outputs ({relative}); "
-                    "give the folders separately"
-                )
-            found[relative] = log
+    return listed
+
+
+def _matching(listed: Sequence[Listed], pattern: str | Sequence[str]) -> list[tuple[Path, Path]]:
+    """:func:`find_logs` of a :func:`_listing`: the files named, and those under the folders
+    that match ``pattern``, each once, sorted by their relative paths."""
+    patterns = [p.lower() for p in _patterns(pattern)]
+    found: dict[Path, Path] = {}
+    seen: set[Path] = set()
+    for log, relative, named in listed:
+        if not (named or any(fnmatch.fnmatch(log.name.lower(), each) for each in patterns)):
+            continue
+        if log.resolve() in seen:
+            continue
+        seen.add(log.resolve())
+        if relative in found:
+            raise ParameterError(
+                f"{found[relative]} and {log} would write the same outputs ({relative}); "
+                "give the folders separately"
+            )
+        found[relative] = log
     return [(log, relative) for relative, log in sorted(found.items())]
 
 
@@ -248,11 +268,23 @@ def plan(
 ) -> list[Job]:
     """The jobs of a batch: each log with its output stem under ``out_dir``. Two logs whose
     stems differ only in case or extension (``flight.bin``, ``flight.BIN``) would write one set
-    of outputs (on a case-insensitive file system, or by suffix): refused, naming both."""
+    of outputs (on a case-insensitive file system, or by suffix): refused, naming both. No log
+    at all is refused too, saying how to take the text logs there if there are any."""
+    listed = _listing(paths)
+    found = _matching(listed, pattern)
+    if not found:
+        wanted = " or ".join(repr(p) for p in _patterns(pattern))
+        texts = len(_matching(listed, TEXT_PATTERN))
+        hint = (
+            f"; {texts} {TEXT_PATTERN} there: --pattern '{TEXT_PATTERN}' takes them"
+            if texts
+            else ""
+        )
+        raise LogReadError(f"no file matching {wanted} under {', '.join(map(str, paths))}{hint}")
     out = Path(out_dir)
     jobs: list[Job] = []
     taken: dict[str, Path] = {}
-    for log, relative in find_logs(paths, pattern):
+    for log, relative in found:
         stem = relative.with_suffix("")
         if compression_named(relative):  # flight.bin.gz: flight.csv, ...
             stem = stem.with_suffix("")
@@ -550,15 +582,6 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
     if shard is not None and not 1 <= shard[0] <= shard[1]:
         raise InvalidParameter("shard", f"must be I/N with 1 <= I <= N, got {shard[0]}/{shard[1]}")
     todo = plan(paths, out_dir, pattern)
-    if not todo:
-        wanted = " or ".join(repr(p) for p in _patterns(pattern))
-        texts = len(find_logs(paths, TEXT_PATTERN))
-        hint = (
-            f"; {texts} {TEXT_PATTERN} there: --pattern '{TEXT_PATTERN}' takes them"
-            if texts
-            else ""
-        )
-        raise LogReadError(f"no file matching {wanted} under {', '.join(map(str, paths))}{hint}")
     if shard is not None:
         todo = todo[shard[0] - 1 :: shard[1]]
     out = Path(out_dir)
