@@ -231,21 +231,29 @@ def test_local_processes_and_a_dask_local_cluster_write_identical_outputs(tmp_pa
     assert different == []
 
 
-def test_unreachable_scheduler_is_one_line(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("address", "code", "said"),
+    [
+        ("tcp://127.0.0.1:9", 2, "cannot reach the Dask scheduler at tcp://127.0.0.1:9: "),
+        ("nonsense", 2, "--scheduler must be an address such as tcp://host:8786, got 'nonsense'"),
+        ("foo://x:1", 2, "unknown address scheme 'foo'"),
+        ("", 2, "--scheduler must be an address such as tcp://host:8786, got ''"),
+    ],
+)
+def test_a_scheduler_out_of_reach_or_no_address_is_one_line(
+    tmp_path: Path, address: str, code: int, said: str
+) -> None:
+    """Not an internal error (a malformed address raised dask's ValueError), not a batch run
+    on local processes (an empty address), and no output folder left behind."""
     pytest.importorskip("dask.distributed")
+    out = tmp_path / "out"
     result = CliRunner().invoke(
-        cli,
-        [
-            "batch",
-            str(SAMPLES / "mission.bin"),
-            "-o",
-            str(tmp_path),
-            "--scheduler",
-            "tcp://127.0.0.1:9",
-        ],
+        cli, ["batch", str(SAMPLES / "mission.bin"), "-o", str(out), "--scheduler", address]
     )
-    assert result.exit_code == 2
-    assert "cannot reach the Dask scheduler" in result.stderr
+    assert result.exit_code == code
+    assert said in result.stderr
+    assert result.stderr.count("\n") == 1
+    assert not out.exists()
 
 
 def test_killed_batch_resumes_without_redoing_finished_logs(tmp_path: Path) -> None:

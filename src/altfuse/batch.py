@@ -455,22 +455,32 @@ def _pool(
     ]
 
 
-def _dask(jobs: list[Job], options: BatchOptions, scheduler: str) -> Iterator[LogResult]:
+def _dask_client(scheduler: str) -> Any:
+    """A client of the Dask scheduler at ``scheduler`` (a ``dask.distributed.Client``),
+    connected before the batch makes its output folder: an address that is none, or a
+    scheduler out of reach, leaves nothing behind."""
     try:
         from dask.distributed import Client
-        from dask.distributed import as_completed as dask_completed
     except ImportError as exc:
         raise ParameterError(
             "--scheduler needs dask.distributed: pip install 'altfuse[dask]'"
         ) from exc
     try:
-        client = Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
+        return Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
+    except ValueError as exc:  # no port, an unknown scheme
+        raise InvalidParameter(
+            "scheduler", f"must be an address such as tcp://host:8786, got {scheduler!r} ({exc})"
+        ) from exc
     except (OSError, TimeoutError) as exc:
         raise ParameterError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from exc
-    with client:
-        futures = client.map(process, jobs, options=options, pure=False)
-        for future in dask_completed(futures):  # type: ignore[no-untyped-call]
-            yield future.result()
+
+
+def _dask(jobs: list[Job], options: BatchOptions, client: Any) -> Iterator[LogResult]:
+    from dask.distributed import as_completed as dask_completed
+
+    futures = client.map(process, jobs, options=options, pure=False)
+    for future in dask_completed(futures):  # type: ignore[no-untyped-call]
+        yield future.result()
 
 
 def printable(text: str) -> str:
@@ -586,11 +596,15 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
         todo = todo[shard[0] - 1 :: shard[1]]
     out = Path(out_dir)
     summary = out / summary_name(shard)
-    with _locked(out, shared=shard is not None):
+    client = None if scheduler is None else _dask_client(scheduler)
+    with (
+        contextlib.nullcontext() if client is None else client,
+        _locked(out, shared=shard is not None),
+    ):
         previous = None if options.force else _previous_summary(summary)
         remove_stale_temporaries(out, recursive=True)
         results = []
-        stream = _dask(todo, options, scheduler) if scheduler else _local(todo, options, workers)
+        stream = _local(todo, options, workers) if client is None else _dask(todo, options, client)
         for result in stream:
             results.append(result)
             if on_result is not None:
