@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 from altfuse.cli import cli
 from altfuse.errors import ParameterError
-from altfuse.evaluation import choose_truth, evaluate, parse_segments
+from altfuse.evaluation import _row, choose_truth, evaluate, parse_segments
 from altfuse.fuse.support import SupportParams
 from altfuse.metrics import error_stats
 from altfuse.pipeline import FuseOptions, prepare_log
@@ -44,6 +44,40 @@ def test_segments_by_length_and_by_boundaries() -> None:
     # issue 19: a boundary outside the log is said, not silently dropped
     with pytest.raises(ParameterError, match=r"^segments 150, -5 s outside the log's clock"):
         parse_segments("30,150,-5", t)
+
+
+@pytest.mark.parametrize("length", ["0.5", "1e-9", "0", "-5", "nan", "inf"])
+def test_a_segment_shorter_than_a_tick_is_refused(length: str) -> None:
+    """Segments of 1e-9 s on a two-minute log were 1.2e11 of them: 893 GiB asked for, and an
+    out-of-memory error advising a lower --rate."""
+    t = np.arange(0, 1001) / 10.0  # 0..100 s at 10 Hz
+    with pytest.raises(ParameterError, match=r"^segments length must be at least the clock's tick"):
+        parse_segments(length, np.arange(0, 101) / 1.0)
+    assert len(parse_segments("0.1", t)) == 1000
+    assert len(parse_segments("0.1", 30 + t)) == 1000  # its tick 0.10000000000000142
+
+
+def test_segment_labels_tell_close_boundaries_apart() -> None:
+    """Labelled with one decimal, boundaries 0.01 s apart gave two segments the label
+    "50.5-50.5s": the second silently replaced the first."""
+    t = np.arange(0, 10001) / 100.0  # 0..100 s at 100 Hz
+    assert list(parse_segments("50.51,50.52,50.53", t)) == [
+        "0.00-50.51s",
+        "50.51-50.52s",
+        "50.52-50.53s",
+        "50.53-100.00s",
+    ]
+    assert list(parse_segments("40", t)) == ["0.0-40.0s", "40.0-80.0s", "80.0-100.0s"]
+    assert len(parse_segments("0.01", t)) == 10000
+
+
+def test_each_segment_holds_its_ticks_the_last_its_end() -> None:
+    estimate, truth = np.arange(11.0), np.zeros(11)  # the error is the time
+    t = np.arange(11.0)
+    spans = parse_segments("2.5,7", t)
+    row = _row("x", "method", estimate, truth, t, spans)
+    assert [(s.n, s.max_abs) for s in row.segments.values()] == [(3, 2.0), (4, 6.0), (4, 10.0)]
+    assert row.overall.n == 11
 
 
 def test_a_folder_given_to_fuse_points_to_batch(tmp_path: Path) -> None:

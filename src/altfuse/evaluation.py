@@ -221,8 +221,9 @@ def truth_or_none(flight: FlightLog, referred: Referred) -> Truth | None:
 
 
 def parse_segments(spec: str | None, t: FloatArray) -> dict[str, tuple[float, float]]:
-    """Segments of the clock from ``spec``: a length in seconds (``30``) for equal windows, or
-    boundaries on the log's clock (``50.5,62.3``)."""
+    """Segments of the clock ``t`` from ``spec``: a length in seconds (``30``) for equal windows,
+    at least the clock's tick, or boundaries on the log's clock (``50.5,62.3``). Labelled by
+    their bounds, with the decimals that tell them apart (:func:`_told_apart`; one mostly)."""
     if not spec:
         return {}
     try:
@@ -231,8 +232,13 @@ def parse_segments(spec: str | None, t: FloatArray) -> dict[str, tuple[float, fl
         raise InvalidParameter("segments", f"takes seconds or boundaries, got {spec!r}") from exc
     start, end = float(t[0]), float(t[-1])
     if len(values) == 1 and "," not in spec:
-        if not values[0] > 0:
-            raise InvalidParameter("segments", f"length must be positive, got {values[0]}")
+        tick = float(t[1] - t[0]) if t.size > 1 else 0.0
+        # a tick of 0.1 s is 0.10000000000000142 on a clock from 30 s
+        if not (math.isfinite(values[0]) and values[0] > 0 and values[0] >= tick * (1 - 1e-9)):
+            raise InvalidParameter(
+                "segments",
+                f"length must be at least the clock's tick ({tick:g} s), got {values[0]:g}",
+            )
         edges = [*np.arange(start, end, values[0]).tolist(), end]
     else:
         outside = [v for v in values if not start < v < end]
@@ -242,9 +248,22 @@ def parse_segments(spec: str | None, t: FloatArray) -> dict[str, tuple[float, fl
                 "segments", f"{listed} s outside the log's clock ({start:.1f}-{end:.1f} s)"
             )
         edges = [start, *sorted(values), end]
-    return {
-        f"{a:.1f}-{b:.1f}s": (float(a), float(b)) for a, b in itertools.pairwise(edges) if b > a
-    }
+    spans = [(float(a), float(b)) for a, b in itertools.pairwise(edges) if b > a]
+    digits = 1
+    while not _told_apart(spans, digits):
+        digits += 1
+    return {_label(span, digits): span for span in spans}
+
+
+def _label(span: tuple[float, float], digits: int) -> str:
+    return f"{span[0]:.{digits}f}-{span[1]:.{digits}f}s"
+
+
+def _told_apart(spans: Sequence[tuple[float, float]], digits: int) -> bool:
+    """Whether the bounds written with ``digits`` decimals give each span its own label, none
+    with its two bounds alike."""
+    bounds = [(f"{a:.{digits}f}", f"{b:.{digits}f}") for a, b in spans]
+    return len(set(bounds)) == len(bounds) and all(a != b for a, b in bounds)
 
 
 def _row(
@@ -255,10 +274,14 @@ def _row(
     t: FloatArray,
     segments: dict[str, tuple[float, float]],
 ) -> Row:
-    per_segment = {
-        label: error_stats(estimate, truth, (t >= a) & (t < b if b < t[-1] else t <= b))
-        for label, (a, b) in segments.items()
-    }
+    """The errors of ``estimate`` over the whole clock ``t`` and over each segment: the ticks
+    from its start up to its end, the last one's end included (a slice of the sorted clock:
+    thousands of segments of a long log in one pass over it)."""
+    per_segment = {}
+    for label, (a, b) in segments.items():
+        first = int(np.searchsorted(t, a, side="left"))
+        stop = int(np.searchsorted(t, b, side="left" if b < t[-1] else "right"))
+        per_segment[label] = error_stats(estimate[first:stop], truth[first:stop])
     return Row(name, kind, estimate, error_stats(estimate, truth), per_segment)
 
 
