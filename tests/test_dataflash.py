@@ -5,6 +5,7 @@ from __future__ import annotations
 import bz2
 import gzip
 import hashlib
+import importlib
 import io
 import lzma
 import os
@@ -261,6 +262,39 @@ def test_not_a_log(tmp_path: Path, content: bytes, message: str) -> None:
     path = tmp_path / "x.bin"
     path.write_bytes(content)
     with pytest.raises(LogReadError, match=message):
+        read_log(path)
+
+
+@pytest.mark.parametrize(("version", "signed"), [("v10", False), ("v20", False), ("v20", True)])
+def test_a_telemetry_log_is_named_as_one(tmp_path: Path, version: str, signed: bool) -> None:
+    """A ground station's recording (``.tlog``: MAVLink packets, each after its time) is what
+    a user finds first on the laptop; said so, with what to fuse instead, not 'not a log'."""
+    dialect = importlib.import_module(f"pymavlink.dialects.{version}.ardupilotmega")
+    mav = dialect.MAVLink(None, srcSystem=1, srcComponent=1)
+    if signed:
+        mav.signing.secret_key, mav.signing.sign_outgoing = bytes(32), True
+    packets = [
+        dialect.MAVLink_heartbeat_message(2, 3, 81, 4, 4, 3),
+        dialect.MAVLink_global_position_int_message(1000, 1, 2, 584_270, 1500, 0, 0, -3, 0),
+        dialect.MAVLink_vfr_hud_message(0.0, 0.0, 0, 40, 584.27, -0.03),
+        dialect.MAVLink_heartbeat_message(2, 3, 81, 4, 4, 3),
+    ]
+    path = tmp_path / "flight.tlog"
+    path.write_bytes(
+        b"".join(
+            int(1_733_400_000e6 + k * 1e5).to_bytes(8, "big") + message.pack(mav)
+            for k, message in enumerate(packets)
+        )
+    )
+    reader = mavutil.mavlink_connection(str(path))  # pymavlink reads it as a .tlog
+    assert [m.get_type() for m in iter(reader.recv_msg, None)] == [
+        "HEARTBEAT", "GLOBAL_POSITION_INT", "VFR_HUD", "HEARTBEAT"
+    ]  # fmt: skip
+    reader.close()
+    with pytest.raises(LogReadError, match=r"flight.tlog: a MAVLink telemetry log \(.tlog"):
+        read_log(path)
+    path.write_bytes(b"\xfe" + path.read_bytes()[1:])  # no time before the packet
+    with pytest.raises(LogReadError, match="not a DataFlash log"):
         read_log(path)
 
 

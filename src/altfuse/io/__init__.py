@@ -30,6 +30,12 @@ _SNIFF_BYTES = 8192
 #: DataFlash log, or one written as text (``flight.log``: converted into a temporary binary
 #: log, :mod:`altfuse.io.dataflash_text`, and described as the file given).
 Kind = Compression | Literal["ulog", "dataflash", "dataflash-text"]
+#: A MAVLink telemetry log (``.tlog``, what a ground station records) is each packet after its
+#: time of reception, microseconds since 1970 as a big-endian uint64: a time within these
+#: years (2000-2100) and a packet's first byte (:func:`_is_telemetry_log`).
+_TLOG_SPAN_US = (946_684_800_000_000, 4_102_444_800_000_000)
+#: A MAVLink packet's first byte, and its length beyond the payload (header and checksum).
+_MAVLINK_FRAMES = {0xFE: 8, 0xFD: 12}  # MAVLink 1, MAVLink 2 (13 more where signed)
 
 
 def sha256_of(path: Path) -> str:
@@ -94,10 +100,30 @@ def _kind(path: Path, head: bytes) -> Kind:
 
     if is_text_log(head):
         return "dataflash-text"
+    if _is_telemetry_log(head):
+        raise LogReadError(
+            f"{path}: a MAVLink telemetry log (.tlog, a ground station's recording), which "
+            "altfuse does not read: fuse the autopilot's own log (a DataFlash .bin)"
+        )
     raise LogReadError(
         f"{path}: not a DataFlash log (no FMT record in its first bytes, as binary or as "
         "text) nor a ULog"
     )
+
+
+def _is_telemetry_log(head: bytes, packets: int = 3) -> bool:
+    """Whether ``head``, a file's first bytes, holds MAVLink packets each after its time of
+    reception (:data:`_TLOG_SPAN_US`): the first ``packets`` of them, as many as it holds."""
+    at = seen = 0
+    while seen < packets and at + 11 <= len(head):
+        stamp = int.from_bytes(head[at : at + 8], "big")
+        magic, length = head[at + 8], head[at + 9]
+        if magic not in _MAVLINK_FRAMES or not _TLOG_SPAN_US[0] <= stamp <= _TLOG_SPAN_US[1]:
+            return False
+        signed = magic == 0xFD and head[at + 10] & 1  # MAVLink 2's incompatibility flags
+        at += 8 + length + _MAVLINK_FRAMES[magic] + 13 * signed
+        seen += 1
+    return seen > 0
 
 
 def _head(path: Path) -> bytes:
