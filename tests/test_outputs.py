@@ -261,6 +261,30 @@ def test_only_altfuses_own_dead_temporaries_are_cleaned(tmp_path: Path) -> None:
     assert [alive.exists(), elsewhere.exists(), mine.exists()] == [True, True, True]
 
 
+def test_what_windows_lacks_is_not_asked_of_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Windows has no flock (the batch module imported fcntl: every command an internal
+    error), no os.fchmod before Python 3.13, and os.kill(pid, 0) sends Ctrl+C there: the
+    outputs are written without them, the batch folder unlocked, a temporary left."""
+    stale = tmp_path / f"{TEMP_PREFIX}{write._HOST}-{dead_pid()}-out.csv.abc123.tmp"
+    stale.write_text("x")
+    monkeypatch.setattr(sys, "platform", "win32")
+    monkeypatch.setitem(sys.modules, "fcntl", None)  # import fcntl: ImportError
+    monkeypatch.delattr(os, "fchmod")
+
+    def kill(pid: int, signum: int) -> None:
+        raise AssertionError(f"os.kill({pid}, {signum}) on Windows")
+
+    monkeypatch.setattr(os, "kill", kill)
+    with atomic_outputs() as stage:
+        stage(tmp_path / "out.csv", lambda f: f.write("time_s\n"))
+    assert (tmp_path / "out.csv").read_text() == "time_s\n"
+    assert stale.exists()
+    with batch_module._locked(tmp_path / "out"), batch_module._locked(tmp_path / "out"):
+        assert (tmp_path / "out").is_dir()
+
+
 def test_sigterm_removes_the_temporaries(tmp_path: Path) -> None:
     def interrupted() -> None:
         with atomic_outputs() as stage:

@@ -270,6 +270,11 @@ def _cannot(path: Path, exc: OSError) -> OutputError:
 
 
 def _pid_alive(pid: int) -> bool:
+    """Whether the process ``pid`` of this host is there (signal 0 asks). On Windows that signal
+    is Ctrl+C, sent to the process group ``pid``, and nothing is asked: taken as alive, its
+    temporary files are left (README)."""
+    if sys.platform == "win32":
+        return True
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -369,7 +374,8 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
             raise _cannot(target, exc) from exc
         staged.append((tmp, target))
         try:
-            os.fchmod(fd, mode)
+            if hasattr(os, "fchmod"):  # not on Windows before Python 3.13: no such bits there
+                os.fchmod(fd, mode)
             _write_into(fd, write, binary, target)
         except OSError as exc:
             raise _cannot(target, exc) from exc
