@@ -305,6 +305,31 @@ def test_killed_batch_resumes_without_redoing_finished_logs(tmp_path: Path) -> N
     assert not list(out.glob(".*.tmp"))
 
 
+def test_a_rerun_without_force_or_skip_existing_is_refused_whole(tmp_path: Path) -> None:
+    """It failed each log alone ("exists"), exit 4, and the summary's rows of the earlier run,
+    every metric, gave way to those failures: now one line, exit 2, nothing written."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    shutil.copy(SAMPLES / "paper_a.bin", logs / "a.bin")
+    out = tmp_path / "out"
+    args = ["batch", str(logs), "-o", str(out), "-j", "1"]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    shutil.copy(SAMPLES / "mission.bin", logs / "b.bin")  # a new log beside it
+    again = CliRunner().invoke(cli, args)
+    assert again.exit_code == 2
+    assert again.stderr == (
+        f"altfuse: error: {out} holds the outputs of 1 of these 2 logs (a.bin): "
+        "--skip-existing keeps the complete ones, --force redoes them\n"
+    )
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    kept = CliRunner().invoke(cli, [*args, "--skip-existing"])
+    assert kept.exit_code == 0, kept.stderr
+    summary = pd.read_csv(out / "summary.csv").set_index("log")
+    assert list(summary.status) == ["skipped", "ok"]
+    assert summary.flight_s.notna().all()  # the skipped log's row kept from the first run
+
+
 def test_skip_existing_redoes_changed_inputs_and_options(tmp_path: Path) -> None:
     logs = tmp_path / "logs"
     logs.mkdir()
@@ -454,14 +479,15 @@ def test_the_index_says_what_made_each_log_s_outputs(tmp_path: Path) -> None:
     assert first["logs"]["a.bin"]["outputs"] == ["a.csv", "a.meta.json"]
     assert first["logs"]["a.bin"]["fuse"]["method"] == "smoother"
     # another method over the same folder without --force: a.bin's outputs are in the way
-    again = run_batch([logs / "a.bin"], out, BatchOptions(fuse=FuseOptions(method="mean")))
+    other = BatchOptions(skip_existing=True, fuse=FuseOptions(method="mean"))
+    again = run_batch([logs / "a.bin"], out, other)
     assert [r.status for r in again] == ["failed"]
     index = json.loads((out / "index.json").read_text())
     assert index["logs"]["a.bin"]["fuse"]["method"] == "smoother"  # what made the files
     assert index["logs"]["a.bin"]["rerun"]["status"] == "failed"
     assert index["logs"]["a.bin"]["rerun"]["fuse"]["method"] == "mean"
     assert index["logs"]["b.bin"] == first["logs"]["b.bin"]
-    run_batch([logs], out, jobs=1, shard=(2, 2))
+    run_batch([logs], out, BatchOptions(skip_existing=True), jobs=1, shard=(2, 2))
     shard = json.loads((out / "index.shard-2-of-2.json").read_text())
     assert list(shard["logs"]) == ["b.bin"]
 

@@ -120,6 +120,10 @@ class Job:
             evaluation=self._with(".evaluation.json") if options.evaluate else None,
         )
 
+    def existing(self, options: BatchOptions) -> list[Path]:
+        """Its outputs that are there already."""
+        return [p for p in self.outputs(options).paths() if p.exists()]
+
     def _with(self, suffix: str) -> Path:
         return self.stem.with_name(self.stem.name + suffix)
 
@@ -321,7 +325,7 @@ def process(job: Job, options: BatchOptions) -> LogResult:
     if options.skip_existing and is_complete(job, options):
         return LogResult(name, "skipped", processing_s=time.perf_counter() - started)
     outputs = job.outputs(options)
-    existing = [p for p in outputs.paths() if p.exists()]
+    existing = job.existing(options)
     if existing and not options.force:
         message = (
             f"{existing[0]} exists; --force overwrites, --skip-existing keeps complete outputs"
@@ -599,6 +603,8 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
     todo = plan(paths, out_dir, pattern)
     if shard is not None:
         todo = todo[shard[0] - 1 :: shard[1]]
+    if not (options.force or options.skip_existing):
+        _refuse_existing(todo, options, Path(out_dir))
     out = Path(out_dir)
     summary = out / summary_name(shard)
     client = None if scheduler is None else _dask_client(scheduler)
@@ -620,6 +626,20 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
         write_summary(results, summary, previous, parquet)
         write_index(results, todo, options, out / summary_name(shard, "index.json"))
     return results
+
+
+def _refuse_existing(jobs: Sequence[Job], options: BatchOptions, out: Path) -> None:
+    """A batch run again without ``--force`` or ``--skip-existing`` on logs whose outputs are
+    there is refused as a whole, its summary untouched: each log failed alone ("exists"), and
+    the summary's rows of the earlier run, every metric, gave way to those failures."""
+    held = [job for job in jobs if job.existing(options)]
+    if held:
+        named = ", ".join(printable(str(job.relative)) for job in held[:3])
+        more = f" and {len(held) - 3} more" if len(held) > 3 else ""
+        raise ParameterError(
+            f"{out} holds the outputs of {len(held)} of these {len(jobs)} logs ({named}{more}):"
+            " --skip-existing keeps the complete ones, --force redoes them"
+        )
 
 
 def summary_name(shard: tuple[int, int] | None = None, name: str = SUMMARY) -> str:

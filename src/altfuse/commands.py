@@ -598,7 +598,8 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
     error), the flight's and the processing's seconds, vehicle, sensors, the reader's notes,
     the share of ticks fused, divergences, and with --evaluate each method's RMSE and maximum
     error. The method options are fuse's; with --evaluate they apply to every method evaluated
-    that takes them. Exit code 0 when no log failed (refusals are not failures), 4 when some
+    that takes them. Run again over logs whose outputs are there, it asks for --skip-existing
+    or --force. Exit code 0 when no log failed (refusals are not failures), 4 when some
     failed, 1 or 2 when the batch itself cannot run.
 
     \b
