@@ -603,9 +603,9 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
     todo = plan(paths, out_dir, pattern)
     if shard is not None:
         todo = todo[shard[0] - 1 :: shard[1]]
-    if not (options.force or options.skip_existing):
-        _refuse_existing(todo, options, Path(out_dir))
     out = Path(out_dir)
+    if not (options.force or options.skip_existing):
+        _refuse_existing(todo, options, out)
     summary = out / summary_name(shard)
     client = None if scheduler is None else _dask_client(scheduler)
     with (
@@ -630,8 +630,8 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
 
 def _refuse_existing(jobs: Sequence[Job], options: BatchOptions, out: Path) -> None:
     """A batch run again without ``--force`` or ``--skip-existing`` on logs whose outputs are
-    there is refused as a whole, its summary untouched: each log failed alone ("exists"), and
-    the summary's rows of the earlier run, every metric, gave way to those failures."""
+    there is refused as a whole, its summary untouched (each log failing alone, "exists", gave
+    the summary's rows of the earlier run, every metric, away to those failures)."""
     held = [job for job in jobs if job.existing(options)]
     if held:
         named = ", ".join(printable(str(job.relative)) for job in held[:3])
