@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+import types
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from click.testing import CliRunner
 from threadpoolctl import threadpool_info
 
 from altfuse import __version__
+from altfuse import batch as batch_module
 from altfuse.batch import EXIT_PARTIAL, BatchOptions, _worker_start, find_logs, run_batch
 from altfuse.cli import cli
 from altfuse.errors import LogReadError, ParameterError
@@ -229,6 +231,52 @@ def test_local_processes_and_a_dask_local_cluster_write_identical_outputs(tmp_pa
     assert len(a) == 5 * 5  # 4 samples + log 0039, five files each; hatemslah failed: none
     different = [name for name in a if not filecmp.cmp(a[name], b[name], shallow=False)]
     assert different == []
+
+
+def test_a_log_whose_dask_workers_die_fails_its_own_row(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A worker killed (out of memory) on every try ended the batch as an internal error with
+    no summary; a log that died beside it failed with it. Now the logs that ended on the
+    cluster run again one at a time, and only what fails alone fails: its row says why."""
+    distributed = pytest.importorskip("dask.distributed")
+    tries = tmp_path / "tries"  # a file per log, a line per try (the function runs as a copy)
+    tries.mkdir()
+
+    def process(job: batch_module.Job, options: BatchOptions) -> batch_module.LogResult:  # noqa: ARG001
+        name = job.log.name
+        with (tries / name).open("a") as tried:
+            tried.write("try\n")
+        first = (tries / name).read_text().count("try") == 1
+        if name == "greedy.bin" or (name == "beside.bin" and first):
+            worker = types.SimpleNamespace(address="tcp://worker")
+            raise distributed.KilledWorker(f"process-{name}", worker, 3)
+        if name == "bare.bin":
+            raise ModuleNotFoundError("No module named 'altfuse'")
+        return batch_module.LogResult(name, "ok")
+
+    monkeypatch.setattr(batch_module, "process", process)
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in ("greedy.bin", "beside.bin", "bare.bin"):
+        (logs / name).write_bytes(b"x")
+    with distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster:
+        results = run_batch([logs], tmp_path / "out", scheduler=cluster.scheduler_address)
+    rows = {r.log: (r.status, r.error) for r in results}
+    assert rows["beside.bin"] == ("ok", "")
+    assert rows["greedy.bin"][0] == "failed"
+    assert rows["greedy.bin"][1].startswith(
+        "not finished on the Dask cluster: KilledWorker: Attempted to run task "
+        "'process-greedy.bin' on 4 different workers, but all those workers died"
+    )
+    assert rows["bare.bin"] == (
+        "failed",
+        "not finished on the Dask cluster: ModuleNotFoundError: No module named 'altfuse'",
+    )
+    counted = {p.name: len(p.read_text().splitlines()) for p in tries.iterdir()}
+    assert counted == {"greedy.bin": 2, "beside.bin": 2, "bare.bin": 1}
+    summary = pd.read_csv(tmp_path / "out" / "summary.csv")
+    assert sorted(summary.status) == ["failed", "failed", "ok"]
 
 
 @pytest.mark.parametrize(

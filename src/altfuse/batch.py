@@ -479,11 +479,43 @@ def _dask_client(scheduler: str) -> Any:
 
 
 def _dask(jobs: list[Job], options: BatchOptions, client: Any) -> Iterator[LogResult]:
+    """The jobs on the Dask cluster of ``client``. :func:`process` never raises for a log: a
+    job that ends in an error ended on the cluster and fails its own row, not the batch (an
+    internal error, no summary, for a fleet's every log). A job whose workers died each time
+    it ran (dask's KilledWorker: out of memory) may have died with another on the worker: those
+    run again one at a time, so that only a log that kills its worker fails (as
+    :func:`_local`'s)."""
+    from dask.distributed import KilledWorker
+
+    killed = []
+    for job, outcome in _on_cluster(client, jobs, options):
+        if isinstance(outcome, KilledWorker) and len(jobs) > 1:
+            killed.append(job)
+        else:
+            yield _finished(job, outcome)
+    for job in killed:
+        for alone, outcome in _on_cluster(client, [job], options):
+            yield _finished(alone, outcome)
+
+
+def _on_cluster(
+    client: Any, jobs: list[Job], options: BatchOptions
+) -> Iterator[tuple[Job, LogResult | BaseException]]:
+    """Each job with its result, or the exception it ended in on the cluster, as they end."""
     from dask.distributed import as_completed as dask_completed
 
     futures = client.map(process, jobs, options=options, pure=False)
+    job_of = {future.key: job for future, job in zip(futures, jobs, strict=True)}
     for future in dask_completed(futures):  # type: ignore[no-untyped-call]
-        yield future.result()
+        failed = future.status == "error"
+        yield job_of[future.key], future.exception() if failed else future.result()
+
+
+def _finished(job: Job, outcome: LogResult | BaseException) -> LogResult:
+    if isinstance(outcome, LogResult):
+        return outcome
+    why = f"not finished on the Dask cluster: {type(outcome).__name__}: {outcome}"
+    return LogResult(printable(str(job.relative)), "failed", why)
 
 
 def printable(text: str) -> str:
