@@ -518,3 +518,24 @@ def test_o_dash_writes_the_csv_to_standard_output(
         "meta": "m.json",
     }
     assert kept.stdout == piped.stdout
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("fuse", SAMPLE_LOG, "-o", "x.csv", "--weights", "-"),
+        ("fuse", SAMPLE_LOG, "-o", "-", "--weights", "-"),
+        ("fuse", SAMPLE_LOG, "-o", "x.csv", "--meta", "-"),
+        ("evaluate", SAMPLE_LOG, "-o", "-"),
+        ("evaluate", SAMPLE_LOG, "--csv", "-"),
+        ("simulate", "hover", "-o", "-"),
+    ],
+)
+def test_dash_is_standard_output_for_the_fused_table_alone(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, args: tuple[str | Path, ...]
+) -> None:
+    """Only ``fuse -o -`` reads "-" as standard output: any other output named "-" was
+    written to a file of that name (the weights beside a table on standard output too)."""
+    monkeypatch.chdir(tmp_path)
+    assert_one_line_error(run(*args), 2, "'-' is standard output, which takes the fused table")
+    assert list(tmp_path.iterdir()) == []

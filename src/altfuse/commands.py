@@ -711,6 +711,7 @@ def simulate(
       altfuse simulate mission -o mission.bin --seed 1 --duration 180
       altfuse simulate hover -o hover.bin --fault gps-glitch --fault lose-baro
     """
+    check_paths([output])
     refuse_existing(force, output)
     flight = simulate_flight(scenario, seed=seed, duration_s=duration_s, faults=faults)
     n = write_simulated_log(flight, output)

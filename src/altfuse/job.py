@@ -62,9 +62,10 @@ class Outputs:
         return self.meta or default_meta_path(self.csv)
 
     def paths(self) -> list[Path]:
-        """Every file this run writes (not standard output)."""
-        optional = (self.csv, self.meta_path, self.weights, self.plot, self.evaluation)
-        return [p for p in optional if p is not None and p != STDOUT]
+        """Every file this run writes: not the table where it goes to standard output."""
+        table = None if self.csv == STDOUT else self.csv
+        optional = (table, self.meta_path, self.weights, self.plot, self.evaluation)
+        return [p for p in optional if p is not None]
 
     def refuse(self, log_path: Path, force: bool = False) -> None:
         """Refuse outputs that would overwrite the input log or each other, or existing files

@@ -309,10 +309,16 @@ def _umask() -> int:
 
 
 def check_paths(outputs: Sequence[Path | None], inputs: Sequence[Path] = ()) -> None:
-    """Refuse a run whose outputs include one of its inputs, name one file twice, or are
-    directories: every check before anything is written."""
+    """Refuse a run whose outputs include one of its inputs, name one file twice, are
+    directories, or are ``-`` (standard output: the fused table's alone, which is not among
+    ``outputs``): every check before anything is written."""
     seen: dict[str, Path] = {}
     for target in (p for p in outputs if p is not None):
+        if target == STDOUT:  # else a file named "-"
+            raise ParameterError(
+                "'-' is standard output, which takes the fused table alone (altfuse fuse -o -): "
+                "name a file for this output (/dev/stdout writes one there)"
+            )
         real = os.path.realpath(target)
         for source in inputs:
             if real == os.path.realpath(source) or _same_file(target, source):
