@@ -518,6 +518,8 @@ def test_o_dash_writes_the_csv_to_standard_output(
         "meta": "m.json",
     }
     assert kept.stdout == piped.stdout
+    quiet = run("-q", "fuse", SAMPLE_LOG, "-o", "-", "--meta", "q.json")
+    assert (quiet.exit_code, quiet.stderr, quiet.stdout) == (0, "", piped.stdout)
 
 
 @pytest.mark.parametrize(

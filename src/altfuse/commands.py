@@ -330,6 +330,8 @@ def fuse(
         logging.getLogger("altfuse").warning("%s: %s's model check %s", log.name, method, check)
     counts = run.provenance["status_counts"]
     sidecar = done.written.get("meta", "none")
+    if streamed and not logging.getLogger("altfuse").isEnabledFor(logging.WARNING):
+        return  # -q: only errors on stderr, where this line goes beside a streamed table
     click.echo(
         f"{'standard output' if output == STDOUT else output}: {run.referred.t.size} rows, "
         f"method {method}, sensors {', '.join(run.referred.names)}; "
