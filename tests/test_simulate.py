@@ -354,6 +354,7 @@ def _write(path: Path, scenario: str, faults: list[str]) -> Path:
         (["mission", "--duration", "5"], "--duration"),
         (["orbit"], "'orbit' is not one of"),
         (["hover", "--fault", "ice"], "'ice' is not one of"),
+        (["hover", "--seed", "-1"], "'--seed': -1 is not in the range x>=0"),  # numpy's error
     ],
 )
 def test_nonsense_simulate_arguments(tmp_path: Path, args: list[str], fragment: str) -> None:

@@ -668,7 +668,9 @@ def info(log: Path, as_json: bool) -> None:
 @click.command()
 @click.argument("scenario", type=click.Choice(list(SCENARIOS)))
 @_output_option("The DataFlash log to write.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option(
+    "--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Random seed (>= 0)."
+)
 @click.option(
     "--duration",
     "duration_s",
