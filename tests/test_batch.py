@@ -540,6 +540,22 @@ def test_the_index_says_what_made_each_log_s_outputs(tmp_path: Path) -> None:
     assert list(shard["logs"]) == ["b.bin"]
 
 
+def test_a_batch_starts_no_more_workers_than_logs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    started: list[int] = []
+    real = batch_module.ProcessPoolExecutor
+
+    def pool(max_workers: int, **kwargs: object) -> ProcessPoolExecutor:
+        started.append(max_workers)
+        return real(max_workers, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(batch_module, "ProcessPoolExecutor", pool)
+    results = run_batch([SAMPLES / "paper_a.bin", SAMPLES / "hover.bin"], tmp_path, jobs=8)
+    assert [r.status for r in results] == ["ok", "ok"]
+    assert started == [2]
+
+
 def test_a_batch_worker_computes_on_one_thread() -> None:
     """The workers fork from a process that loaded numpy (a Python caller's): each holds its
     BLAS pool to one thread, or the pools spin beside the other workers (8 logs of 30 MB on 2

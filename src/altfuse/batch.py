@@ -433,12 +433,14 @@ def _pool(
     jobs: list[Job], options: BatchOptions, workers: int
 ) -> Generator[LogResult, None, tuple[list[Job], list[Job]]]:
     """The results of the jobs one pool of ``workers`` processes finished; returns the jobs
-    lost when a worker died, those that had started and those that had not."""
+    lost when a worker died, those that had started and those that had not. No more processes
+    than jobs: a pool that forks starts them all at once (``-j 99999`` over 4 logs forked
+    until the system killed the batch, exit 137)."""
     context = multiprocessing.get_context()
     started = context.SimpleQueue()
     lost: list[Job] = []
     with ProcessPoolExecutor(
-        max_workers=workers,
+        max_workers=min(workers, len(jobs)),
         mp_context=context,
         initializer=_worker_start,
         initargs=(os.getpid(), started),
