@@ -163,6 +163,16 @@ def test_method_parameters_pass_through_evaluate(tmp_path: Path) -> None:
     assert "--process-noise does not apply to method 'mean'" in refused.stderr  # --q: its alias
 
 
+def test_a_method_named_twice_is_evaluated_once(tmp_path: Path) -> None:
+    out = tmp_path / "report.json"
+    args = ["evaluate", str(PAPER_A), "--methods", "mean, support,mean,", "-o", str(out)]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    rows = json.loads(out.read_text())["rows"]
+    assert [r["name"] for r in rows if r["kind"] == "method"] == ["mean", "support"]
+    assert result.stdout.count("\nmean ") == 1
+
+
 def test_method_that_cannot_run_is_listed() -> None:
     log = shared_log("ardupilot/diaven_sample01.bin")  # no IMU: multilayer cannot run
     result = CliRunner().invoke(cli, ["evaluate", str(log)])

@@ -445,7 +445,8 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
         check_plot_path(plot_path)
     check_paths([json_path, csv_path, plot_path], [log])
     refuse_existing(force, json_path, csv_path, plot_path)
-    chosen = [m.strip() for m in (methods or ",".join(METHODS)).split(",") if m.strip()]
+    named = (m.strip() for m in (methods or ",".join(METHODS)).split(","))
+    chosen = list(dict.fromkeys(m for m in named if m))  # each once, in the order given
     params = params_by_method(_method_values(options), chosen)
     with _progress_line():
         result = evaluate_log(log, chosen, FuseOptions(params=params, **options), truth, segments)
