@@ -9,7 +9,9 @@ import importlib
 import io
 import lzma
 import os
+import pty
 import re
+import subprocess
 import sys
 import threading
 from collections.abc import Callable
@@ -361,6 +363,27 @@ def test_a_piped_log_reads_as_the_log_it_carries(
     packed.write_bytes(gzip.compress(b"not a log"))
     with pytest.raises(LogReadError, match=f"^{re.escape(str(packed))}: not a DataFlash log"):
         read_log(packed)
+
+
+def test_a_terminal_is_no_log(tmp_path: Path) -> None:
+    """``altfuse fuse - -o f.csv`` typed without a pipe waited for a log to be typed, as if the
+    command hung; a terminal given by name (``/dev/tty``) did the same."""
+    master, terminal = pty.openpty()
+    try:
+        for log, stdin in (("-", terminal), (os.ttyname(terminal), subprocess.DEVNULL)):
+            ran = subprocess.run(
+                [sys.executable, "-m", "altfuse", "fuse", log, "-o", str(tmp_path / "f.csv")],
+                stdin=stdin, capture_output=True, text=True, timeout=120, check=False,
+            )  # fmt: skip
+            assert (ran.returncode, ran.stderr) == (
+                1,
+                f"altfuse: error: {log}: a terminal, not a log; pipe one in "
+                "(altfuse fuse - -o f.csv < flight.bin)\n",
+            )
+    finally:
+        os.close(master)
+        os.close(terminal)
+    assert not (tmp_path / "f.csv").exists()
 
 
 class _Zeros(io.RawIOBase):

@@ -224,12 +224,23 @@ def _read_piped(path: Path) -> FlightLog:
     ``/dev/stdin``), copied and read (:func:`_read_copied`): its size and sha256 are the bytes
     that came."""
     if str(path) == "-":
+        _refuse_terminal(path, sys.stdin.buffer)
         return _read_copied(path, cast(io.BufferedReader, sys.stdin.buffer), "standard input")
     try:
         with path.open("rb") as stream:
+            _refuse_terminal(path, stream)
             return _read_copied(path, stream, "a pipe")
     except OSError as exc:
         raise LogReadError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+
+
+def _refuse_terminal(path: Path, stream: IO[bytes]) -> None:
+    """A terminal gives no log, only what is typed into it: ``altfuse fuse - -o f.csv`` without
+    a pipe waited for it in silence, as if the command hung."""
+    if stream.isatty():
+        raise LogReadError(
+            f"{path}: a terminal, not a log; pipe one in (altfuse fuse - -o f.csv < flight.bin)"
+        )
 
 
 def _read_copied(path: Path, stream: io.BufferedIOBase, source: str) -> FlightLog:
