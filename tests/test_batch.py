@@ -129,6 +129,8 @@ def test_finding_logs(tmp_path: Path) -> None:
         find_logs([tmp_path / "a.bin", tmp_path / "x" / "a.bin"])
     with pytest.raises(LogReadError, match="no such file or folder"):
         find_logs([tmp_path / "nope"])
+    with pytest.raises(LogReadError, match=r"^-: a batch takes files and folders, not standard"):
+        find_logs(["-"])
     with pytest.raises(LogReadError, match="no file matching"):
         run_batch([tmp_path / "x"], tmp_path / "out", pattern="*.ulg")
 

@@ -220,6 +220,11 @@ def _listing(paths: Sequence[str | Path]) -> list[Listed]:
                 for p in _files_under(root)
                 if not p.name.startswith(".")
             ]
+        elif str(raw) == "-":
+            raise LogReadError(
+                "-: a batch takes files and folders, not standard input "
+                "(altfuse fuse - -o f.csv reads one log from it)"
+            )
         else:
             raise LogReadError(f"{root}: no such file or folder")
     return listed
