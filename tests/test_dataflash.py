@@ -367,7 +367,8 @@ def test_a_piped_log_reads_as_the_log_it_carries(
 
 def test_a_terminal_is_no_log(tmp_path: Path) -> None:
     """``altfuse fuse - -o f.csv`` typed without a pipe waited for a log to be typed, as if the
-    command hung; a terminal given by name (``/dev/tty``) did the same."""
+    command hung; a terminal given by name (``/dev/tty``) did the same. A closed standard
+    input is said too."""
     master, terminal = pty.openpty()
     try:
         for log, stdin in (("-", terminal), (os.ttyname(terminal), subprocess.DEVNULL)):
@@ -383,6 +384,14 @@ def test_a_terminal_is_no_log(tmp_path: Path) -> None:
     finally:
         os.close(master)
         os.close(terminal)
+    closed = subprocess.run(
+        f"'{sys.executable}' -m altfuse fuse - -o '{tmp_path / 'f.csv'}' <&-",
+        shell=True, capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert (closed.returncode, closed.stderr) == (
+        1,
+        "altfuse: error: -: standard input is closed; pipe a log in\n",
+    )  # an internal error before: sys.stdin is None
     assert not (tmp_path / "f.csv").exists()
 
 

@@ -224,6 +224,8 @@ def _read_piped(path: Path) -> FlightLog:
     ``/dev/stdin``), copied and read (:func:`_read_copied`): its size and sha256 are the bytes
     that came."""
     if str(path) == "-":
+        if sys.stdin is None:  # closed: altfuse fuse - <&-
+            raise LogReadError("-: standard input is closed; pipe a log in")
         _refuse_terminal(path, sys.stdin.buffer)
         return _read_copied(path, cast(io.BufferedReader, sys.stdin.buffer), "standard input")
     try:
