@@ -522,6 +522,19 @@ def test_o_dash_writes_the_csv_to_standard_output(
     assert (quiet.exit_code, quiet.stderr, quiet.stdout) == (0, "", piped.stdout)
 
 
+def test_a_closed_standard_output_is_said(tmp_path: Path) -> None:
+    """``-o - >&-``: Python's sys.stdout is None; an internal error before."""
+    closed = subprocess.run(
+        f"'{sys.executable}' -m altfuse fuse '{SAMPLE_LOG}' -o - >&-",
+        shell=True, cwd=tmp_path, capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert (closed.returncode, closed.stderr) == (
+        1,
+        "altfuse: error: -: standard output is closed; name a file with -o\n",
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize(
     "args",
     [

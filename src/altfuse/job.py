@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import logging
+import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -25,6 +26,7 @@ from altfuse.pipeline import (
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.write import (
     STDOUT,
+    OutputError,
     Writer,
     check_paths,
     default_meta_path,
@@ -69,7 +71,10 @@ class Outputs:
 
     def refuse(self, log_path: Path, force: bool = False) -> None:
         """Refuse outputs that would overwrite the input log or each other, or existing files
-        unless ``force`` (:func:`altfuse.write.check_paths`)."""
+        unless ``force`` (:func:`altfuse.write.check_paths`), and a table for a standard output
+        that is closed (``-o - >&-``: Python's ``sys.stdout`` is None)."""
+        if self.csv == STDOUT and sys.stdout is None:
+            raise OutputError("-: standard output is closed; name a file with -o")
         check_paths(self.paths(), [log_path])
         refuse_existing(force, *self.paths())
 
