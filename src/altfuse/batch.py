@@ -239,9 +239,10 @@ def _matching(listed: Sequence[Listed], pattern: str | Sequence[str]) -> list[tu
     for log, relative, named in listed:
         if not (named or any(fnmatch.fnmatch(log.name.lower(), each) for each in patterns)):
             continue
-        if log.resolve() in seen:
+        real = log.resolve()
+        if real in seen:
             continue
-        seen.add(log.resolve())
+        seen.add(real)
         if relative in found:
             raise ParameterError(
                 f"{found[relative]} and {log} would write the same outputs ({relative}); "
@@ -644,7 +645,7 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
         todo = todo[shard[0] - 1 :: shard[1]]
     out = Path(out_dir)
     if not (options.force or options.skip_existing):
-        _refuse_existing(todo, options, out)
+        _refuse_rerun(todo, options, out)
     summary = out / summary_name(shard)
     client = None if scheduler is None else _dask_client(scheduler)
     with (
@@ -667,7 +668,7 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
     return results
 
 
-def _refuse_existing(jobs: Sequence[Job], options: BatchOptions, out: Path) -> None:
+def _refuse_rerun(jobs: Sequence[Job], options: BatchOptions, out: Path) -> None:
     """A batch run again without ``--force`` or ``--skip-existing`` on logs whose outputs are
     there is refused as a whole, its summary untouched (each log failing alone, "exists", gave
     the summary's rows of the earlier run, every metric, away to those failures)."""
