@@ -13,6 +13,7 @@ from altfuse.datum import (
     Wind,
     detector_takeoffs,
     dynamic_head,
+    on_clock,
     refer_to_takeoff,
     referred_samples,
 )
@@ -450,6 +451,22 @@ def test_a_segment_s_samples_are_referred_with_its_own_datum() -> None:
         on_clock = ref.h[np.searchsorted(ref.t, samples.t), j]
         np.testing.assert_allclose(samples.value, on_clock, atol=1e-9)
         assert (samples.t > 110).sum() > 500  # the second flight's samples are there
+
+
+@pytest.mark.parametrize("second_takes_off", [True, False])
+def test_another_clock_s_ticks_are_referred_as_the_datum_s_own(second_takes_off: bool) -> None:
+    """A datum found on one clock refers another's ticks (a coarser output: :func:`on_clock`)
+    as it referred its own, segment by segment: every fifth tick, the same heights."""
+    aligned, _ = two_flights(second_takes_off)
+    ref = refer_to_takeoff(aligned, splices=[110.0])
+    rows = np.arange(0, aligned.t.size, 5)
+    coarse = Aligned(
+        aligned.t[rows], aligned.names, aligned.kinds, aligned.z[rows], 2.0, 1.0, "union", {}
+    )
+    moved = on_clock(ref, coarse)
+    assert moved.t is coarse.t
+    assert moved.offsets == ref.offsets
+    np.testing.assert_allclose(moved.h, ref.h[rows], atol=1e-12)
 
 
 def test_a_barometer_s_scale_is_the_one_its_best_segment_tells() -> None:

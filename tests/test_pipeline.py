@@ -50,6 +50,35 @@ def test_a_copter_whose_barometer_warms_on_the_ground_is_referred_where_it_took_
     assert np.max(np.abs(gap)) < 0.8  # 0.67
 
 
+@pytest.mark.parametrize(
+    ("log", "rate_hz"),
+    [
+        ("sample", 0.2),  # its GPS dropped: "too few [ticks] beside baro to find its datum"
+        ("truth/copter_4.0.0dev_aadimishra_autotest_climb99m.BIN", 0.2),  # 8.6 m off
+        ("truth/copter_4.0.4rc2_leaerialtech_hexa_10m.BIN", 0.5),  # 1.4 m off
+    ],
+)
+def test_the_datum_does_not_move_with_the_output_rate(log: str, rate_hz: float) -> None:
+    """The datum was found on the output's clock: at 0.2-0.5 Hz a take-off a few seconds into
+    the log blurs into a tick or two, and the whole fused height moved by metres (or a sensor
+    was dropped); now it is found on a 10 Hz clock whatever the output's rate."""
+    path = SAMPLE_LOG if log == "sample" else shared_log(log)
+    fine = fuse_log(path, FuseOptions(method="mean"))
+    coarse = fuse_log(path, FuseOptions(method="mean", rate_hz=rate_hz))
+    assert coarse.referred.names == fine.referred.names
+    assert coarse.referred.takeoff_s == fine.referred.takeoff_s
+    for a, b in zip(coarse.referred.offsets, fine.referred.offsets, strict=True):
+        assert a.offset_m == b.offset_m
+        assert a.scale == b.scale
+    assert coarse.referred.t.size == pytest.approx(fine.referred.t.size * rate_hz / 10.0, abs=1)
+    # the coarse clock's ticks referred as the fine clock's are
+    step = round(10.0 / rate_hz)
+    on_both = np.isin(np.round(fine.referred.t * 10.0), np.round(coarse.referred.t * 10.0))
+    assert np.all(np.round(fine.referred.t[on_both] * 10.0) % step == 0)
+    heights = np.abs(coarse.referred.h - fine.referred.h[on_both])
+    assert np.nanmedian(heights) < 0.3  # a cell's mean against a tick's spline
+
+
 def test_ardusub_is_refused() -> None:
     with pytest.raises(UnsupportedLogError, match="ArduSub"):
         fuse_log(shared_log("ardupilot/ardusubtools_small.BIN"))

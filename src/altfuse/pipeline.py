@@ -14,6 +14,7 @@ import numpy as np
 from altfuse import __version__
 from altfuse.align import Aligned, Lag, Span, align, gps_lags, inertial_lag, shift, splices
 from altfuse.datum import (
+    DATUM_RATE_HZ,
     Offset,
     Referral,
     Referred,
@@ -21,6 +22,7 @@ from altfuse.datum import (
     Track,
     Wind,
     detector_takeoffs,
+    on_clock,
     refer_to_takeoff,
     referred_samples,
     tilt_correct,
@@ -168,17 +170,22 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     lags = _lags(flight, sensors) if options.referral == "full" else {}
     sensors = [shift(s, lags[s.name]) if s.name in lags else s for s in sensors]
     aligned = align(sensors, options.rate_hz, options.max_gap_s, options.span)
+    fine = aligned
+    if options.rate_hz < DATUM_RATE_HZ:
+        fine = align(sensors, DATUM_RATE_HZ, options.max_gap_s, options.span)
     aligned_at = time.perf_counter()
     referred = refer_to_takeoff(
-        aligned,
+        fine,
         options.ground_window_s,
         options.takeoff_climb_m,
         options.referral,
         clearances=ground_clearances(flight),
-        splices=splices(aligned, None if flight.imu is None else flight.imu.t),
+        splices=splices(fine, None if flight.imu is None else flight.imu.t),
         track=_track(flight),
         takeoffs=sorted((*flight.takeoffs, *detector_takeoffs(_samples(flight.landed)))),
     )
+    if fine is not aligned:
+        referred = on_clock(referred, aligned)
     log.info(
         "%s: aligned %d ticks in %.2f s, datum in %.2f s",
         name,
