@@ -25,9 +25,10 @@ from pymavlink import mavutil
 
 from altfuse.errors import LogReadError
 from altfuse.io import read_log
-from altfuse.io.dataflash import _Records
+from altfuse.io.dataflash import _Records, rejoined
 from altfuse.io.dataflash_writer import DataFlashWriter
 from altfuse.io.fastdf import index_file
+from altfuse.model import Series
 from altfuse.screen import GPS_CONVERGED_VACC_M, NOT_CONVERGED, not_converged
 from altfuse.simulate import simulate_flight, write_simulated_log
 from conftest import SAMPLE_LOG, shared_log
@@ -476,6 +477,52 @@ def test_copters_take_offs_are_read_from_its_land_detectors_events(log: str) -> 
     takeoffs = read_log(path).takeoffs
     assert len(takeoffs) == len(said) >= 1
     np.testing.assert_allclose(takeoffs, said, atol=0.05)
+
+
+def _standing_baro(level_before: float, at: float, lagging: int = 0) -> Series:
+    """A barometer at 10 Hz on the ground for 20 s, reading ``level_before`` until ``at`` [s]
+    (and ``lagging`` samples after it) and 0 from then on, with 5 cm of noise."""
+    rng = np.random.default_rng(4)
+    t = 100.0 + np.arange(200) / 10.0
+    old = t < at
+    old[np.flatnonzero(~old)[:lagging]] = True
+    value = np.where(old, level_before, 0.0) + rng.normal(0.0, 0.05, t.size)
+    return Series("baro", "baro", "BARO.Alt", "baro calibration", t, value)
+
+
+def test_a_barometer_re_zeroed_at_arming_is_rejoined_across_its_step() -> None:
+    """Copter arming without a home re-zeroes its barometers (EV EKF_ALT_RESET): the ground
+    before it read 2.4 m higher, a whole flight off where the datum's window held it. Its
+    earlier samples are moved by the step, a sample after the event still on the old zero
+    with them."""
+    s = _standing_baro(2.4, 110.0, lagging=1)
+    out, notes = rejoined(s, (110.0,))
+    np.testing.assert_array_equal(out.value[s.t > 110.1], s.value[s.t > 110.1])
+    assert abs(np.median(out.value[s.t < 110.0])) < 0.05  # on the new zero
+    assert abs(out.value[np.flatnonzero(s.t >= 110.0)[0]]) < 0.2  # the lagging sample too
+    assert np.ptp(out.value - s.value) == pytest.approx(2.4, abs=0.05)
+    step = (out.value - s.value)[0]
+    assert notes == [
+        "baro: re-zeroed by the autopilot at 110.0 s (EV EKF_ALT_RESET): 101 samples before "
+        f"it moved by its step, {step:+.2f} m"
+    ]
+
+
+@pytest.mark.parametrize(
+    ("level", "resets"),
+    [
+        (0.0, (110.0,)),  # logged where the EKF kept its datum (a rangefinder its height)
+        (2.4, (100.05,)),  # too few samples before it to tell a level
+        (2.4, ()),
+    ],
+)
+def test_a_barometer_is_left_as_read_where_no_step_is_told(
+    level: float, resets: tuple[float, ...]
+) -> None:
+    s = _standing_baro(level, resets[0] if resets else 110.0)
+    out, notes = rejoined(s, resets)
+    np.testing.assert_array_equal(out.value, s.value)
+    assert notes == []
 
 
 def test_records_read_again_once_let_go_are_the_same() -> None:

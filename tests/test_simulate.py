@@ -16,6 +16,7 @@ from altfuse.inertial import G, vertical_acceleration
 from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, prepare
 from altfuse.simulate import (
+    ARMING_LEAD_S,
     BARO_AIRFLOW_M,
     BARO_AIRFLOW_WIND_M_S,
     BOOT_S,
@@ -118,7 +119,7 @@ def test_paper_a_scenario_baro_departs_in_its_segment() -> None:
 
 
 #: The faults with a test of their own below.
-OWN_TESTS = ("roll-flip", "splice", "hard-landing", "baro-airflow")
+OWN_TESTS = ("roll-flip", "splice", "hard-landing", "baro-airflow", "baro-rezero")
 
 
 @pytest.mark.parametrize("fault", [f for f in FAULTS if f not in OWN_TESTS])
@@ -168,6 +169,22 @@ def test_faults(fault: str, tmp_path: Path) -> None:
         assert b["rangefinder"].value.size > 0
     else:  # baro-drift: 0.05 m/s from 40 % of the flight
         assert (b["baro"].value - a["baro"].value)[-1] == pytest.approx(0.05 * 72, abs=0.1)
+
+
+def test_a_barometer_re_zeroed_at_arming_is_read_as_one_zero(tmp_path: Path) -> None:
+    """``baro-rezero``: 2 m high on the ground until the vehicle arms, 3 s before take-off, where
+    ``EV`` ``EKF_ALT_RESET`` is logged; read back continuous, on the zero it flew with."""
+    ((armed, _),) = simulate_flight("mission", 3, faults=["baro-rezero"]).records["EV"]
+    assert armed == pytest.approx(10.0 - ARMING_LEAD_S, abs=0.02)
+    clean = read_log(_write(tmp_path / "clean.bin", "mission", []))
+    faulty = read_log(_write(tmp_path / "faulty.bin", "mission", ["baro-rezero"]))
+    assert f"re-zeroed by the autopilot at {BOOT_S + armed:.1f} s" in faulty.notes[-1]
+    (a,), (b,) = ([s for s in f.sensors if s.kind == "baro"] for f in (clean, faulty))
+    moved = b.value - a.value
+    after = b.t >= BOOT_S + armed
+    np.testing.assert_array_equal(moved[after], 0.0)
+    assert np.ptp(moved[~after]) < 1e-5  # one shift (float32), the step to its noise
+    assert abs(moved[0]) < 0.1
 
 
 def test_a_barometer_in_the_airflow_reads_high_as_the_square_of_the_airspeed(

@@ -37,14 +37,16 @@ logged at 25 Hz, as older and busier logs do); and two of the other sensors:
 barometer 1 m higher at the flight's top airspeed, as the square of that speed, in a 2 m/s
 wind along the track: the air flowing past lowers the pressure it reads, as on real copters;
 not on the hover and Paper A's flight, which do not cruise) and ``rangefinder-low`` (mounted
-0.1 m up, below its 0.2 m minimum: OutOfRangeLow on the ground). And three of the flight and
+0.1 m up, below its 0.2 m minimum: OutOfRangeLow on the ground). And four of the flight and
 its log: ``roll-flip`` (a full turn about the roll axis in 1 s, as aerobatic and
 tumbling logs show: the logged roll, in [-180, 180) degrees as ArduPilot logs it, wraps through
 +-180, and the rangefinder, pointing at the sky, reads out of range), ``splice`` (nothing
 logged for 20 s from half the flight, the vehicle flying on: a log stopped and resumed, or cut
-and joined) and ``hard-landing`` (the motors cut 1 m above the ground on the last descent: a
+and joined), ``hard-landing`` (the motors cut 1 m above the ground on the last descent: a
 fall, an impact the accelerometer clips at its 16 g range, and a bounce; not on the hover,
-which does not land).
+which does not land) and ``baro-rezero`` (the barometer 2 m high on the ground until the
+vehicle arms, 3 s before take-off, where the autopilot re-zeroes it and logs ``EV``
+``EKF_ALT_RESET``, as Copter arming without a home does).
 """
 
 from __future__ import annotations
@@ -60,6 +62,7 @@ import numpy as np
 from altfuse import __version__
 from altfuse.errors import ParameterError
 from altfuse.inertial import G
+from altfuse.io.dataflash import EV_EKF_ALT_RESET
 from altfuse.model import FloatArray
 from altfuse.params import InvalidParameter
 from altfuse.write import atomic_outputs
@@ -324,6 +327,7 @@ FAULTS = (
     "roll-flip",
     "splice",
     "hard-landing",
+    "baro-rezero",
 )
 #: The faults that need a scenario that lands, and one that cruises.
 LANDING_FAULTS = ("hard-landing",)
@@ -348,6 +352,13 @@ RANGEFINDER_LOW_MOUNT_M = 0.1
 FLIP_S = 1.0
 #: How long nothing is logged with ``splice`` [s], from half the flight.
 SPLICE_S = 20.0
+#: ``baro-rezero``: how much higher the barometer reads on the ground before the vehicle arms
+#: [m] (it drifted so since boot, a warming sensor: one real copter's rose 2.5 m in 72 s), and
+#: how long before take-off it arms [s]; there the autopilot re-zeroes it and logs ``EV``
+#: ``EKF_ALT_RESET`` (:data:`altfuse.io.dataflash.EV_EKF_ALT_RESET`), as Copter arming without
+#: a home does.
+REZERO_DRIFT_M = 2.0
+ARMING_LEAD_S = 3.0
 #: ``hard-landing``: the height [m] at which the motors cut on the last descent, and the share of
 #: its speed the vehicle keeps, upwards, at each impact (its legs' restitution); it rests once
 #: it bounces slower than SETTLE_M_S.
@@ -499,6 +510,10 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     if "baro-airflow" in faults:
         air = np.abs(along - BARO_AIRFLOW_WIND_M_S)  # through the air, the wind from the south
         alt = alt + BARO_AIRFLOW_M * (sensed(ts, air) / air.max()) ** 2
+    if "baro-rezero" in faults:
+        armed = float(t[np.argmax(p.height_m > 0.0)]) - ARMING_LEAD_S
+        alt = alt + np.where(ts < armed, REZERO_DRIFT_M, 0.0)
+        records["EV"] = [(armed, (EV_EKF_ALT_RESET,))]
     log("BARO", ts, 0, alt, temp, 1)
 
     # rangefinder: 20 Hz along the body axis, out-of-range codes as drivers log them
@@ -575,6 +590,7 @@ _TYPES = {
     "SIM": ("Qf", "TimeUS,Alt", "sm", "F0"),
     "MSG": ("QZ", "TimeUS,Message", "s-", "F-"),
     "PARM": ("QNf", "TimeUS,Name,Value", "s--", "F--"),
+    "EV": ("QB", "TimeUS,Id", "s-", "F-"),
 }
 
 
@@ -593,7 +609,8 @@ def write_simulated_log(flight: SimulatedFlight, path: str | Path) -> int:
 
         writer = DataFlashWriter(handle)
         for name, (fmt, columns, units, mults) in _TYPES.items():
-            writer.define(name, fmt, columns, units, mults)
+            if name in flight.records or name == "MSG":  # written below
+                writer.define(name, fmt, columns, units, mults)
         faults = ", faults " + "+".join(flight.faults) if flight.faults else ""
         message = (
             f"ArduCopter V4.0.0 (simulated by altfuse {__version__}: {flight.scenario}, "

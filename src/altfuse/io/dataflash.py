@@ -15,7 +15,9 @@ Altitude sources (inputs):
 
 - ``GPS.Alt`` [m AMSL], only with ``Status >= 3`` (3D fix); every instance (``I`` field or GPS2).
 - ``BARO.Alt`` [m above the calibration point], every instance (``I`` or BAR2/BAR3); samples
-  flagged unhealthy (``Health``/``H`` == 0) are dropped.
+  flagged unhealthy (``Health``/``H`` == 0) are dropped. Where Copter re-zeroed its barometers
+  (arming without a home: ``EV`` ``EKF_ALT_RESET``), their earlier samples are moved by the
+  step there (:func:`rejoined`).
 - ``RFND.Dist`` [m above ground] per ``Instance`` (4.x) or ``Dist1``/``Dist2`` (3.x), only with
   ``Stat == 4`` (Good) where Stat is logged, else non-zero; ``SONR`` in old logs.
 - Fallbacks: with no BARO records, ``CTUN.BAlt``/``BarAlt``; with no RFND/SONR records,
@@ -45,6 +47,7 @@ from altfuse.errors import LogReadError
 from altfuse.io import hashing
 from altfuse.io.fastdf import Format, Index, _text, index_file
 from altfuse.io.framing import FORMAT_TO_STRUCT
+from altfuse.metrics import mad_sigma
 from altfuse.model import (
     DOWNWARD,
     Attitude,
@@ -647,14 +650,68 @@ def _read_landed(rec: _Records) -> Series | None:
 #: Copter's land detector logs no verdict, only its changes, as ``EV`` records: this one
 #: (``LogEvent::NOT_LANDED`` in AP_Logger.h) when it says the vehicle has left the ground.
 EV_NOT_LANDED = 28
+#: Copter arming without a home (no GPS fix yet: an indoor flight) resets the EKF's height
+#: datum, which re-zeroes every barometer at the vehicle's height (``AP_Arming_Copter::arm``,
+#: ``NavEKF3_core::resetHeightDatum``: ``AP::baro().update_calibration()``), and logs this
+#: event (``LogEvent::EKF_ALT_RESET``): ``BARO.Alt`` steps by what it drifted since boot.
+EV_EKF_ALT_RESET = 60
+#: A barometer's level on each side of a reset: its median over this span [s], beyond
+#: RESET_MARGIN_S of the event (where a sample or two may still read the old zero, or already
+#: the new one).
+RESET_SPAN_S = 1.0
+RESET_MARGIN_S = 0.2
+#: Fewest samples on each side for a reset's step to be measured.
+RESET_MIN_SAMPLES = 3
+#: A step is moved out where it exceeds this many standard errors of the two levels' difference
+#: (the event is logged where the EKF did not reset, a rangefinder its height source).
+RESET_MIN_SIGMAS = 4.0
 
 
-def _read_takeoffs(rec: _Records) -> tuple[float, ...]:
-    """The times [s] at which Copter's land detector said the vehicle left the ground."""
+def _read_events(rec: _Records, event: int) -> tuple[float, ...]:
+    """The times [s] of Copter's ``EV`` records with the ``Id`` ``event``."""
     if not rec.has("EV", "Id"):
         return ()
-    t = _event_times(rec)[rec.raw("EV", "Id") == EV_NOT_LANDED]
+    t = _event_times(rec)[rec.raw("EV", "Id") == event]
     return tuple(sorted(float(x) for x in t[np.isfinite(t)]))
+
+
+def rejoined(s: Series, resets: tuple[float, ...]) -> tuple[Series, list[str]]:
+    """The barometer ``s`` made continuous across the times ``resets`` [s] its autopilot
+    re-zeroed it on the ground (:data:`EV_EKF_ALT_RESET`): the samples before each moved by the
+    step there (the level after less the level before, :data:`RESET_SPAN_S`), so that the ground
+    before it and the flight after it share one zero; a note on each step moved. Left as it is
+    where a side has too few samples or the step is within the levels' noise."""
+    t, value, notes = s.t, s.value.copy(), []
+    for at in sorted(resets, reverse=True):  # a later step moves both sides of an earlier one
+        before = (t >= at - RESET_MARGIN_S - RESET_SPAN_S) & (t < at - RESET_MARGIN_S)
+        after = (t > at + RESET_MARGIN_S) & (t <= at + RESET_MARGIN_S + RESET_SPAN_S)
+        if min(before.sum(), after.sum()) < RESET_MIN_SAMPLES:
+            continue
+        low, high = float(np.median(value[before])), float(np.median(value[after]))
+        spread = np.concatenate((value[before] - low, value[after] - high))
+        sigma = mad_sigma(spread)
+        # a median's standard error: sqrt(pi / 2) that of a mean
+        error = 1.2533 * sigma * float(np.sqrt(1.0 / before.sum() + 1.0 / after.sum()))
+        step = high - low
+        if not abs(step) > RESET_MIN_SIGMAS * error:
+            continue
+        # each sample within the margin on the side it reads
+        near = (t >= at - RESET_MARGIN_S) & (t <= at + RESET_MARGIN_S)
+        moved = (t < at - RESET_MARGIN_S) | (near & (np.abs(value - low) < np.abs(value - high)))
+        value[moved] += step
+        notes.append(
+            f"{s.name}: re-zeroed by the autopilot at {at:.1f} s (EV EKF_ALT_RESET): "
+            f"{int(moved.sum())} samples before it moved by its step, {step:+.2f} m"
+        )
+    return replace(s, value=value), notes
+
+
+def _rejoin_resets(b: _Builder, resets: tuple[float, ...]) -> None:
+    """Every barometer :func:`rejoined` across the autopilot's resets ``resets``."""
+    for name, s in list(b.sensors.items()):
+        if s.kind == "baro" and resets:
+            b.sensors[name], notes = rejoined(s, resets)
+            b.notes.extend(notes)
 
 
 def _event_times(rec: _Records) -> FloatArray:
@@ -721,7 +778,9 @@ def read_dataflash(path: str | Path) -> FlightLog:
 def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     """The flight in ``rec``, the log at ``path`` whose sha256 ``digest`` is computing."""
     b = _Builder(rec)
-    takeoffs = _read_takeoffs(rec)  # before any type goes: an old log's EV takes their times
+    # before any type goes: an old log's EV takes their times
+    takeoffs = _read_events(rec, EV_NOT_LANDED)
+    resets = _read_events(rec, EV_EKF_ALT_RESET)
     _read_gps(b)
     rec.done("GPA", "GPA2", "GPA3")
     have_baro = _read_baro(b)
@@ -729,6 +788,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     have_rangefinder = _read_rangefinder(b)
     rec.done("RFND", "SONR")
     _read_ctun_fallbacks(b, have_baro, have_rangefinder)
+    _rejoin_resets(b, resets)
     vehicle, firmware = _firmware(rec)
     params = _params(rec)
     if vehicle == "unknown" and _SUB_ONLY_PARAMETER in params:
