@@ -525,6 +525,37 @@ def test_a_barometer_is_left_as_read_where_no_step_is_told(
     assert notes == []
 
 
+def test_the_heights_an_arming_reset_zeroes_are_read_continuous(tmp_path: Path) -> None:
+    """A log with ``EV`` 60 (EKF_ALT_RESET) at 110 s: BARO.Alt and XKF1.PD step there on the
+    ground, POS.Alt (above sea level: the EKF's origin moves to keep it) does not. Read, the
+    first two are continuous, the third as logged; each step said in the notes."""
+    path = tmp_path / "rezero.bin"
+    with path.open("wb") as handle:
+        writer = DataFlashWriter(handle)
+        writer.define("BARO", "QBffB", "TimeUS,I,Alt,Temp,Health", "s#mO-", "F-00-")
+        writer.define("XKF1", "QBf", "TimeUS,C,PD", "s#m", "F-0")
+        writer.define("POS", "Qf", "TimeUS,Alt", "sm", "F0")
+        writer.define("EV", "QB", "TimeUS,Id", "s-", "F-")
+        for k in range(200):  # 20 s at 10 Hz, on the ground
+            t = 100.0 + k / 10.0
+            drift = 1.5 if t < 110.0 else 0.0
+            us = round(t * 1e6)
+            writer.write("BARO", us, 0, drift + 0.01 * (k % 3), 30.0, 1)
+            writer.write("XKF1", us, 0, -drift - 0.01 * (k % 2))
+            writer.write("POS", us, 584.0 + 0.01 * (k % 2))
+            if k == 100:
+                writer.write("EV", us - 5_000, 60)
+    flight = read_log(path)
+    (baro,) = flight.sensors
+    refs = {r.name: r for r in flight.references}
+    assert np.ptp(baro.value) < 0.05
+    assert np.ptp(refs["ekf"].value) < 0.05
+    assert np.ptp(refs["pos"].value) == pytest.approx(0.01, abs=1e-4)
+    said = [n for n in flight.notes if "re-zeroed by the autopilot at 110.0 s" in n]
+    assert [n.split(":")[0] for n in said] == ["baro", "ekf"]
+    assert "by its step, -1.50 m" in said[0]
+
+
 def test_records_read_again_once_let_go_are_the_same() -> None:
     # the reader lets each type's records go once read (a 300 MB log's: 92 MB at once); one
     # read again is gathered again, not lost

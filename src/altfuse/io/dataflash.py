@@ -676,11 +676,12 @@ def _read_events(rec: _Records, event: int) -> tuple[float, ...]:
 
 
 def rejoined(s: Series, resets: tuple[float, ...]) -> tuple[Series, list[str]]:
-    """The barometer ``s`` made continuous across the times ``resets`` [s] its autopilot
-    re-zeroed it on the ground (:data:`EV_EKF_ALT_RESET`): the samples before each moved by the
-    step there (the level after less the level before, :data:`RESET_SPAN_S`), so that the ground
-    before it and the flight after it share one zero; a note on each step moved. Left as it is
-    where a side has too few samples or the step is within the levels' noise."""
+    """The height ``s`` (a barometer, or the EKF's own height: the reset zeroes both) made
+    continuous across the times ``resets`` [s] its autopilot re-zeroed it on the ground
+    (:data:`EV_EKF_ALT_RESET`): the samples before each moved by the step there (the level
+    after less the level before, :data:`RESET_SPAN_S`), so that the ground before it and the
+    flight after it share one zero; a note on each step moved. Left as it is where a side has
+    too few samples or the step is within the levels' noise."""
     t, value, notes = s.t, s.value.copy(), []
     for at in sorted(resets, reverse=True):  # a later step moves both sides of an earlier one
         before = (t >= at - RESET_MARGIN_S - RESET_SPAN_S) & (t < at - RESET_MARGIN_S)
@@ -706,12 +707,26 @@ def rejoined(s: Series, resets: tuple[float, ...]) -> tuple[Series, list[str]]:
     return replace(s, value=value), notes
 
 
-def _rejoin_resets(b: _Builder, resets: tuple[float, ...]) -> None:
-    """Every barometer :func:`rejoined` across the autopilot's resets ``resets``."""
-    for name, s in list(b.sensors.items()):
-        if s.kind == "baro" and resets:
-            b.sensors[name], notes = rejoined(s, resets)
-            b.notes.extend(notes)
+#: The references the same reset zeroes: the EKF's height from its origin (``XKF1.PD``: set to
+#: 0 there) and Copter's altitude above home (``CTUN.Alt``); not the EKF's height above sea
+#: level (``POS``, ``AHR2``), whose origin moves to keep it, nor the simulator's truth.
+RESET_REFERENCES = ("ekf", "ctun")
+
+
+def _rejoin_resets(
+    b: _Builder, references: list[Series], resets: tuple[float, ...]
+) -> tuple[Series, ...]:
+    """Every barometer of ``b``, and the ``references`` of RESET_REFERENCES (returned),
+    :func:`rejoined` across the autopilot's resets ``resets``."""
+
+    def each(s: Series) -> Series:
+        out, notes = rejoined(s, resets)
+        b.notes.extend(notes)
+        return out
+
+    if resets:
+        b.sensors.update({n: each(s) for n, s in b.sensors.items() if s.kind == "baro"})
+    return tuple(each(r) if resets and r.name in RESET_REFERENCES else r for r in references)
 
 
 def _event_times(rec: _Records) -> FloatArray:
@@ -788,7 +803,6 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     have_rangefinder = _read_rangefinder(b)
     rec.done("RFND", "SONR")
     _read_ctun_fallbacks(b, have_baro, have_rangefinder)
-    _rejoin_resets(b, resets)
     vehicle, firmware = _firmware(rec)
     params = _params(rec)
     if vehicle == "unknown" and _SUB_ONLY_PARAMETER in params:
@@ -800,7 +814,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     rec.done("ATT")
     vibration = _read_vibration(rec)
     rec.done("VIBE")
-    references = tuple(_read_references(rec))
+    references = _rejoin_resets(b, _read_references(rec), resets)
     rec.done("XKF1", "NKF1", "ORGN", "AHR2", "POS", "CTUN", "SIM")
     speed = _read_gps_field(rec, "Spd", b.not_converged)
     course = _read_gps_field(rec, "GCrs", b.not_converged)
