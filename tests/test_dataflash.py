@@ -508,6 +508,19 @@ def test_a_barometer_re_zeroed_at_arming_is_rejoined_across_its_step() -> None:
     ]
 
 
+def test_a_reset_s_step_is_measured_on_the_ground_before_an_early_take_off() -> None:
+    """An auto take-off climbs at 2 m/s from 0.6 s after arming: the level after the reset was
+    a median over the climb's first second, 0.4 m high (the ground before it as much low);
+    with the land detector's take-off it ends there."""
+    s = _standing_baro(2.4, 110.0)
+    climbing = s.t > 110.6
+    s = replace(s, value=s.value + np.where(climbing, 2.0 * (s.t - 110.6), 0.0))
+    out, _ = rejoined(s, (110.0,), takeoffs=(105.0, 110.6))
+    assert abs(np.median(out.value[s.t < 109.8])) < 0.05
+    early, _ = rejoined(s, (110.0,))
+    assert np.median(early.value[s.t < 109.8]) > 0.2
+
+
 @pytest.mark.parametrize(
     ("level", "resets"),
     [

@@ -675,17 +675,22 @@ def _read_events(rec: _Records, event: int) -> tuple[float, ...]:
     return tuple(sorted(float(x) for x in t[np.isfinite(t)]))
 
 
-def rejoined(s: Series, resets: tuple[float, ...]) -> tuple[Series, list[str]]:
+def rejoined(
+    s: Series, resets: tuple[float, ...], takeoffs: tuple[float, ...] = ()
+) -> tuple[Series, list[str]]:
     """The height ``s`` (a barometer, or the EKF's own height: the reset zeroes both) made
     continuous across the times ``resets`` [s] its autopilot re-zeroed it on the ground
     (:data:`EV_EKF_ALT_RESET`): the samples before each moved by the step there (the level
-    after less the level before, :data:`RESET_SPAN_S`), so that the ground before it and the
-    flight after it share one zero; a note on each step moved. Left as it is where a side has
-    too few samples or the step is within the levels' noise."""
+    after less the level before, :data:`RESET_SPAN_S`, the level after up to the land
+    detector's next ``takeoffs`` time: an auto take-off may climb a second after arming), so
+    that the ground before it and the flight after it share one zero; a note on each step
+    moved. Left as it is where a side has too few samples or the step is within the levels'
+    noise."""
     t, value, notes = s.t, s.value.copy(), []
     for at in sorted(resets, reverse=True):  # a later step moves both sides of an earlier one
+        end = min([at + RESET_MARGIN_S + RESET_SPAN_S, *(x for x in takeoffs if x > at)])
         before = (t >= at - RESET_MARGIN_S - RESET_SPAN_S) & (t < at - RESET_MARGIN_S)
-        after = (t > at + RESET_MARGIN_S) & (t <= at + RESET_MARGIN_S + RESET_SPAN_S)
+        after = (t > at + RESET_MARGIN_S) & (t <= end)
         if min(before.sum(), after.sum()) < RESET_MIN_SAMPLES:
             continue
         low, high = float(np.median(value[before])), float(np.median(value[after]))
@@ -714,13 +719,15 @@ RESET_REFERENCES = ("ekf", "ctun")
 
 
 def _rejoin_resets(
-    b: _Builder, references: list[Series], resets: tuple[float, ...]
+    b: _Builder, references: list[Series], events: tuple[tuple[float, ...], tuple[float, ...]]
 ) -> tuple[Series, ...]:
     """Every barometer of ``b``, and the ``references`` of RESET_REFERENCES (returned),
-    :func:`rejoined` across the autopilot's resets ``resets``."""
+    :func:`rejoined` across the autopilot's resets (``events``: those, and the land
+    detector's take-offs)."""
+    resets = events[0]
 
     def each(s: Series) -> Series:
-        out, notes = rejoined(s, resets)
+        out, notes = rejoined(s, *events)
         b.notes.extend(notes)
         return out
 
@@ -814,7 +821,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     rec.done("ATT")
     vibration = _read_vibration(rec)
     rec.done("VIBE")
-    references = _rejoin_resets(b, _read_references(rec), resets)
+    references = _rejoin_resets(b, _read_references(rec), (resets, takeoffs))
     rec.done("XKF1", "NKF1", "ORGN", "AHR2", "POS", "CTUN", "SIM")
     speed = _read_gps_field(rec, "Spd", b.not_converged)
     course = _read_gps_field(rec, "GCrs", b.not_converged)
