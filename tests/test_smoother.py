@@ -120,6 +120,8 @@ def test_sigma_override_and_nonsense_options(tmp_path: Path) -> None:
         (["--gate", "0"], "--gate"),
         (["--offset-noise", "baro=-1"], "--offset-noise"),
         (["--offset-noise", "sonar=1"], "--offset-noise names no sensor"),
+        # the last silently won
+        (["--sigma", "gps=0.5", "--sigma", "gps=0.8"], "--sigma gives gps twice (0.5 and 0.8)"),
     ):
         bad = CliRunner().invoke(
             cli, ["fuse", str(FAULTS), "-o", str(tmp_path / "x.csv"), "-m", "smoother", *args]

@@ -36,7 +36,7 @@ from altfuse.info import as_text, damage, describe
 from altfuse.io import read_log
 from altfuse.job import Outputs, fuse_to_files
 from altfuse.metrics import ErrorStats
-from altfuse.params import UNIT_SUFFIXES, fields, flag_of, hints, unit_of
+from altfuse.params import UNIT_SUFFIXES, InvalidParameter, fields, flag_of, hints, unit_of
 from altfuse.pipeline import FuseOptions
 from altfuse.plot import check_plot_path, run_figure, writer
 from altfuse.simulate import FAULTS, SCENARIOS, simulate_flight, write_simulated_log
@@ -216,8 +216,18 @@ def _method_values(options: dict[str, Any]) -> dict[str, Any]:
         name = str(option.name)
         value = options.pop(name, None)
         if ctx.get_parameter_source(name) not in (ParameterSource.DEFAULT, None):
-            values[name] = dict(value) if option.multiple else value
+            values[name] = _once_each(name, value) if option.multiple else value
     return values
+
+
+def _once_each(name: str, pairs: tuple[tuple[str, float], ...]) -> dict[str, float]:
+    """A repeated ``NAME=NUMBER`` option's values by name; a name given two values is
+    refused (the last silently won)."""
+    out: dict[str, float] = {}
+    for key, number in pairs:
+        if out.setdefault(key, number) != number:
+            raise InvalidParameter(name, f"gives {key} twice ({out[key]:g} and {number:g})")
+    return out
 
 
 # a folder is taken: read_log says it is one, and points to batch
