@@ -151,3 +151,7 @@ class Params:
 
     def __post_init__(self) -> None:
         validate(self)
+
+    def check_tick(self, tick_s: float) -> None:
+        """Refuse a clock of ticks ``tick_s`` [s] apart that the method cannot run on
+        (:class:`InvalidParameter`); every clock is one for most."""

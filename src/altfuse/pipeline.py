@@ -89,6 +89,7 @@ class FuseOptions:
                     f"method {name!r} takes {wanted.__name__}, not {type(given).__name__}"
                 )
         object.__setattr__(self, "params", dict(self.params))
+        self.params_of().check_tick(1.0 / self.rate_hz)
 
     def params_of(self, name: str | None = None) -> Params:
         """The parameters method ``name`` (default: ``method``) runs with."""
