@@ -519,6 +519,11 @@ def test_a_reset_s_step_is_measured_on_the_ground_before_an_early_take_off() -> 
     assert abs(np.median(out.value[s.t < 109.8])) < 0.05
     early, _ = rejoined(s, (110.0,))
     assert np.median(early.value[s.t < 109.8]) > 0.2
+    # the detector's verdict inside the margin: the first three samples after it, not none
+    # (the 2.4 m step was left whole)
+    soon, notes = rejoined(s, (110.0,), takeoffs=(110.25,))
+    assert abs(np.median(soon.value[s.t < 109.8])) < 0.1
+    assert len(notes) == 1
 
 
 @pytest.mark.parametrize(

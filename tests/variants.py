@@ -21,7 +21,10 @@ and alignment:
   read in forward flight: :data:`altfuse.datum.DYNAMIC_PRIOR`; 1.3 m at 5 m/s where ``k`` is
   1); a plane's as logged (its static port: ``k`` 1 would be 108 m at the 3.3 plane's 46 m/s);
 - ``windy-<w>``: the same with ``k`` 1 at the airspeed in a steady wind of ``w`` m/s blowing
-  to the east (the ground velocity from the GPS's speed and course, less the wind).
+  to the east (the ground velocity from the GPS's speed and course, less the wind);
+- ``rezero-<s>``: the barometers 2 m high until ``s`` seconds before the take-off (the
+  datum's), where the autopilot re-zeroed them (Copter arming without a home), read as altfuse
+  reads such a log (``EV`` ``EKF_ALT_RESET`` there: :func:`altfuse.io.dataflash.rejoined`).
 """
 
 from __future__ import annotations
@@ -33,7 +36,10 @@ import numpy as np
 
 from altfuse.datum import Track, Wind
 from altfuse.inertial import G
+from altfuse.io.dataflash import rejoined
 from altfuse.model import FlightLog, Samples, Series
+from altfuse.pipeline import FuseOptions, prepare
+from altfuse.simulate import REZERO_DRIFT_M
 
 ALTITUDE = ("gps", "baro", "rangefinder")
 
@@ -82,6 +88,20 @@ def _airflow(s: Series, track: Track, k: float, east_m_s: float = 0.0) -> Series
     return replace(s, value=s.value + k * v**2 / (2.0 * G))
 
 
+def _rezeroed(flight: FlightLog, lead_s: float) -> FlightLog:
+    """``rezero-<s>`` (the module doc): unchanged where no take-off is found."""
+    takeoff = prepare(flight, FuseOptions()).referred.takeoff_s
+    if takeoff is None:
+        return flight
+    at = takeoff - lead_s
+
+    def read(s: Series) -> Series:
+        high = replace(s, value=s.value + np.where(s.t < at, REZERO_DRIFT_M, 0.0))
+        return rejoined(high, (at,), flight.takeoffs)[0]
+
+    return _each(flight, "baro", read)
+
+
 def _noisy(s: Series, rng: np.random.Generator, _: str) -> Series:
     """0.3 m of white noise and a random walk of 0.01 m^2/s (a real receiver's)."""
     dt = np.maximum(np.diff(s.t, prepend=s.t[0]), 0.0)
@@ -115,6 +135,8 @@ def variant(flight: FlightLog, how: str, seed: int = 1) -> FlightLog:
             if (series := getattr(flight, field)) is not None
         }
         return replace(_each(flight, "gps", lambda s: _thinned(s, rng, arg)), **speeds)
+    if what == "rezero":
+        return _rezeroed(flight, float(arg))
     if what in ("airflow", "windy"):
         speed, course = flight.ground_speed, flight.ground_course
         if flight.vehicle != "copter" or speed is None or course is None:

@@ -33,6 +33,7 @@ inputs: EKF height (``XKF1``/``NKF1`` ``-PD``, with the EKF origin from ``ORGN``
 from __future__ import annotations
 
 import logging
+import math
 import re
 from collections.abc import Iterator, Mapping
 from concurrent.futures import Future
@@ -682,15 +683,19 @@ def rejoined(
     continuous across the times ``resets`` [s] its autopilot re-zeroed it on the ground
     (:data:`EV_EKF_ALT_RESET`): the samples before each moved by the step there (the level
     after less the level before, :data:`RESET_SPAN_S`, the level after up to the land
-    detector's next ``takeoffs`` time: an auto take-off may climb a second after arming), so
-    that the ground before it and the flight after it share one zero; a note on each step
-    moved. Left as it is where a side has too few samples or the step is within the levels'
-    noise."""
+    detector's next ``takeoffs`` time, or over its first RESET_MIN_SAMPLES where that comes
+    sooner: an auto take-off may climb a second after arming), so that the ground before it
+    and the flight after it share one zero; a note on each step moved. Left as it is where a
+    side has too few samples or the step is within the levels' noise."""
     t, value, notes = s.t, s.value.copy(), []
     for at in sorted(resets, reverse=True):  # a later step moves both sides of an earlier one
-        end = min([at + RESET_MARGIN_S + RESET_SPAN_S, *(x for x in takeoffs if x > at)])
         before = (t >= at - RESET_MARGIN_S - RESET_SPAN_S) & (t < at - RESET_MARGIN_S)
-        after = (t > at + RESET_MARGIN_S) & (t <= end)
+        after = (t > at + RESET_MARGIN_S) & (t <= at + RESET_MARGIN_S + RESET_SPAN_S)
+        flying = min((x for x in takeoffs if x > at), default=math.inf)
+        if (after & (t <= flying)).sum() >= RESET_MIN_SAMPLES:
+            after &= t <= flying
+        else:
+            after[np.flatnonzero(after)[RESET_MIN_SAMPLES:]] = False
         if min(before.sum(), after.sum()) < RESET_MIN_SAMPLES:
             continue
         low, high = float(np.median(value[before])), float(np.median(value[after]))
