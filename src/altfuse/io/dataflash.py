@@ -702,7 +702,7 @@ def rejoined(
         spread = np.concatenate((value[before] - low, value[after] - high))
         sigma = mad_sigma(spread)
         # a median's standard error: sqrt(pi / 2) that of a mean
-        error = 1.2533 * sigma * float(np.sqrt(1.0 / before.sum() + 1.0 / after.sum()))
+        error = math.sqrt(math.pi / 2.0) * sigma * math.sqrt(1 / before.sum() + 1 / after.sum())
         step = high - low
         if not abs(step) > RESET_MIN_SIGMAS * error:
             continue
