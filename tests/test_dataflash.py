@@ -25,7 +25,7 @@ from pymavlink import mavutil
 
 from altfuse.errors import LogReadError
 from altfuse.io import read_log
-from altfuse.io.dataflash import _Records, rejoined
+from altfuse.io.dataflash import RESET_MAX, _Records, rejoined
 from altfuse.io.dataflash_writer import DataFlashWriter
 from altfuse.io.fastdf import index_file
 from altfuse.model import Series
@@ -572,6 +572,27 @@ def test_the_heights_an_arming_reset_zeroes_are_read_continuous(tmp_path: Path) 
     said = [n for n in flight.notes if "re-zeroed by the autopilot at 110.0 s" in n]
     assert [n.split(":")[0] for n in said] == ["baro", "ekf"]
     assert "by its step, -1.50 m" in said[0]
+
+
+def test_a_log_with_more_resets_than_armings_reads_its_barometers_as_logged(
+    tmp_path: Path,
+) -> None:
+    """Each reset is a pass over every barometer sample: 100 k of them in a hostile log would
+    read for minutes. Past RESET_MAX the events are not used, and the notes say so."""
+    path = tmp_path / "resets.bin"
+    with path.open("wb") as handle:
+        writer = DataFlashWriter(handle)
+        writer.define("BARO", "QBffB", "TimeUS,I,Alt,Temp,Health", "s#mO-", "F-00-")
+        writer.define("EV", "QB", "TimeUS,Id", "s-", "F-")
+        for k in range(400):  # 40 s at 10 Hz, a 1.5 m step at 20 s
+            us = round((100.0 + k / 10.0) * 1e6)
+            writer.write("BARO", us, 0, 1.5 if k < 200 else 0.0, 30.0, 1)
+            if k < RESET_MAX + 1:
+                writer.write("EV", us + (0 if k else 20_000_000), 60)  # the first at 120 s
+    flight = read_log(path)
+    (baro,) = flight.sensors
+    assert np.ptp(baro.value) == pytest.approx(1.5)
+    assert any(f"{RESET_MAX + 1} events, more than the {RESET_MAX}" in n for n in flight.notes)
 
 
 def test_records_read_again_once_let_go_are_the_same() -> None:

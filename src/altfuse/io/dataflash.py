@@ -666,6 +666,10 @@ RESET_MIN_SAMPLES = 3
 #: A step is moved out where it exceeds this many standard errors of the two levels' difference
 #: (the event is logged where the EKF did not reset, a rangefinder its height source).
 RESET_MIN_SIGMAS = 4.0
+#: Most resets one log is taken to hold (one at each arming without a home); a log with more is
+#: damaged or hostile, and its resets are not used: each costs a pass over every barometer
+#: sample (5 ms over a 300 MB log's 1.2 M; 100 k of them would read for minutes).
+RESET_MAX = 100
 
 
 def _read_events(rec: _Records, event: int) -> tuple[float, ...]:
@@ -730,6 +734,12 @@ def _rejoin_resets(
     :func:`rejoined` across the autopilot's resets (``events``: those, and the land
     detector's take-offs)."""
     resets = events[0]
+    if len(resets) > RESET_MAX:
+        b.notes.append(
+            f"EV EKF_ALT_RESET: {len(resets)} events, more than the {RESET_MAX} armings a log "
+            "is taken to hold: not used (the barometers read as logged)"
+        )
+        return tuple(references)
 
     def each(s: Series) -> Series:
         out, notes = rejoined(s, *events)
