@@ -672,12 +672,14 @@ RESET_MIN_SIGMAS = 4.0
 RESET_MAX = 100
 
 
-def _read_events(rec: _Records, event: int) -> tuple[float, ...]:
-    """The times [s] of Copter's ``EV`` records with the ``Id`` ``event``."""
+def _read_events(rec: _Records, *events: int) -> tuple[tuple[float, ...], ...]:
+    """Per ``Id`` in ``events``, the times [s] of Copter's ``EV`` records with it (the records'
+    times found once: in an old log, each a search of the whole index)."""
     if not rec.has("EV", "Id"):
-        return ()
-    t = _event_times(rec)[rec.raw("EV", "Id") == event]
-    return tuple(sorted(float(x) for x in t[np.isfinite(t)]))
+        return tuple(() for _ in events)
+    t, ids = _event_times(rec), rec.raw("EV", "Id")
+    told = np.isfinite(t)
+    return tuple(tuple(sorted(t[told & (ids == event)].tolist())) for event in events)
 
 
 def rejoined(
@@ -728,12 +730,11 @@ RESET_REFERENCES = ("ekf", "ctun")
 
 
 def _rejoin_resets(
-    b: _Builder, references: list[Series], events: tuple[tuple[float, ...], tuple[float, ...]]
+    b: _Builder, references: list[Series], resets: tuple[float, ...], takeoffs: tuple[float, ...]
 ) -> tuple[Series, ...]:
     """Every barometer of ``b``, and the ``references`` of RESET_REFERENCES (returned),
-    :func:`rejoined` across the autopilot's resets (``events``: those, and the land
-    detector's take-offs)."""
-    resets = events[0]
+    :func:`rejoined` across the autopilot's ``resets`` (the land detector's ``takeoffs``
+    bounding the ground after each)."""
     if len(resets) > RESET_MAX:
         b.notes.append(
             f"EV EKF_ALT_RESET: {len(resets)} events, more than the {RESET_MAX} armings a log "
@@ -742,7 +743,7 @@ def _rejoin_resets(
         return tuple(references)
 
     def each(s: Series) -> Series:
-        out, notes = rejoined(s, *events)
+        out, notes = rejoined(s, resets, takeoffs)
         b.notes.extend(notes)
         return out
 
@@ -816,8 +817,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     """The flight in ``rec``, the log at ``path`` whose sha256 ``digest`` is computing."""
     b = _Builder(rec)
     # before any type goes: an old log's EV takes their times
-    takeoffs = _read_events(rec, EV_NOT_LANDED)
-    resets = _read_events(rec, EV_EKF_ALT_RESET)
+    takeoffs, resets = _read_events(rec, EV_NOT_LANDED, EV_EKF_ALT_RESET)
     _read_gps(b)
     rec.done("GPA", "GPA2", "GPA3")
     have_baro = _read_baro(b)
@@ -836,7 +836,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     rec.done("ATT")
     vibration = _read_vibration(rec)
     rec.done("VIBE")
-    references = _rejoin_resets(b, _read_references(rec), (resets, takeoffs))
+    references = _rejoin_resets(b, _read_references(rec), resets, takeoffs)
     rec.done("XKF1", "NKF1", "ORGN", "AHR2", "POS", "CTUN", "SIM")
     speed = _read_gps_field(rec, "Spd", b.not_converged)
     course = _read_gps_field(rec, "GCrs", b.not_converged)
