@@ -463,7 +463,7 @@ def test_another_clock_s_ticks_are_referred_as_the_datum_s_own(second_takes_off:
     coarse = Aligned(
         aligned.t[rows], aligned.names, aligned.kinds, aligned.z[rows], 2.0, 1.0, "union", {}
     )
-    moved = on_clock(ref, coarse)
+    moved = on_clock(ref, coarse, 10.0)
     assert moved.t is coarse.t
     assert moved.offsets == ref.offsets
     np.testing.assert_allclose(moved.h, ref.h[rows], atol=1e-12)

@@ -240,3 +240,17 @@ def test_a_segment_with_its_own_ground_has_its_truth_referred_there() -> None:
         lo, hi = segment.on_ground_s
         ground = (t >= lo) & (t <= hi)
         assert abs(np.nanmedian(truth[ground])) < 1e-6
+
+
+def test_the_truth_is_referred_where_the_datum_was_found_whatever_the_clock() -> None:
+    """At 0.2 Hz the 4.5 plane's first tick comes 2 s after its ground window (50.6-52.6 s, on
+    the 10 Hz clock the datum is found on): its truth was referred over the whole flight
+    instead, and every method and sensor measured 27 m off. Now at the datum's own ticks."""
+    path = shared_log("truth/plane_4.5.0dev_eozbademci_autotest_climb88m.BIN")
+    fine = evaluate(path, ["smoother"])
+    coarse = evaluate(path, ["smoother"], FuseOptions(rate_hz=0.2))
+    assert coarse.prepared.referred.t[0] > coarse.prepared.referred.ground_window_s[1]
+    rmse = {r.name: r.overall.rmse for r in coarse.rows}
+    assert rmse["smoother"] < 0.05  # 0.019
+    on_both = np.isin(fine.prepared.referred.t, coarse.prepared.referred.t)
+    np.testing.assert_allclose(coarse.truth.h, fine.truth.h[on_both], atol=1e-9)

@@ -57,10 +57,11 @@ from altfuse.steps import Step, find_steps
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
 MIN_WINDOW_TICKS = 3
-#: Least rate [Hz] of the clock the datum is found on (the default clock's): on the truth logs
-#: at 0.5 Hz the fused height moved by 1.4-4.9 m on two of 13 (a take-off 8 s into the log
-#: blurred into four ticks), at 0.2 Hz by over 0.1 m on eight (up to 20 m); at 1-2 Hz by up
-#: to 0.1 m (the noisy 3.3 plane aside).
+#: Least rate [Hz] of the clock the datum is found on (the default clock's): on the output's
+#: own clock the 13 truth logs and 3 PX4 simulator logs at 0.5 Hz moved by 1.4 and 4.9 m on
+#: two (a take-off 8 s into the log blurred into four ticks), and at 0.2 Hz 14 of the 16 were
+#: refused (the GPS had too few ticks beside the barometer to be referred), the other two
+#: 0.2 and 0.5 m off at most; at 1-2 Hz by up to 0.1 m (the noisy 3.3 plane aside).
 DATUM_RATE_HZ = 10.0
 #: A rangefinder valid on less of the ground window than this reads below its minimum range
 #: there: its valid readings are the noise's tail above the minimum, biased high (a mount 0.1 m
@@ -304,6 +305,19 @@ class Referred:
     steps: tuple[Step, ...] = ()  # between two sensors' heights (:mod:`altfuse.steps`)
     wind: Wind | None = None  # the main segment's, as its barometers' scale fits told it
     detected: bool = False  # the take-off is the autopilot's land detector's, not a rise
+    datum_rate_hz: float | None = None  # the clock the datum was found on; None: ``t``'s own
+
+    def datum_ticks(self, span: tuple[float, float]) -> FloatArray:
+        """The ticks within ``span`` [s] of the clock the datum was found on (:func:`on_clock`):
+        where a reference is referred as the sources were (a coarser ``t`` may have none in
+        the ground window)."""
+        lo, hi = span
+        if self.datum_rate_hz is None:
+            return self.t[(self.t >= lo) & (self.t <= hi)]
+        rate = self.datum_rate_hz  # its ticks k / rate (a bound on one: k to the ulp)
+        first, last = math.ceil(lo * rate - 1e-6), math.floor(hi * rate + 1e-6)
+        ticks: FloatArray = np.arange(first, last + 1) / rate
+        return ticks
 
     @property
     def datum_windows(self) -> tuple[tuple[float, float] | None, ...]:
@@ -1055,16 +1069,16 @@ def referred_samples(sensors: Sequence[Series], referred: Referred) -> tuple[Sam
     return tuple(out)
 
 
-def on_clock(referred: Referred, aligned: Aligned) -> Referred:
-    """``referred``, found on another clock of the same sources (:data:`DATUM_RATE_HZ`), with
-    its heights on ``aligned``'s: each source's ticks referred as its samples are
-    (:func:`referred_samples`)."""
+def on_clock(referred: Referred, aligned: Aligned, datum_rate_hz: float) -> Referred:
+    """``referred``, found on another clock of the same sources (of ``datum_rate_hz``:
+    :data:`DATUM_RATE_HZ`), with its heights on ``aligned``'s: each source's ticks referred as
+    its samples are (:func:`referred_samples`)."""
     h = np.full((aligned.t.size, len(referred.offsets)), np.nan)
     for j, o in enumerate(referred.offsets):
         z = aligned.z[:, aligned.names.index(o.name)]
         value, keep = _referred_values(referred, o, aligned.t, z)
         h[keep, j] = value[keep]
-    return replace(referred, t=aligned.t, h=h)
+    return replace(referred, t=aligned.t, h=h, datum_rate_hz=datum_rate_hz)
 
 
 def _referred_values(

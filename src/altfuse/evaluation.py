@@ -120,31 +120,43 @@ REFERENCE_MAX_GAP_S = 1.0
 def _on_clock(series: Series, referred: Referred) -> FloatArray:
     """``series`` on the clock (linear, no extrapolation, no bridging of a pause in it),
     referred over the ground window; in a spliced log, each segment with a ground of its own
-    over that ground, as the sensors are (:func:`altfuse.datum.refer_to_takeoff`)."""
-    t = referred.t
+    over that ground, as the sensors are (:func:`altfuse.datum.refer_to_takeoff`): at the
+    ticks of the clock the datum was found on (:meth:`~altfuse.datum.Referred.datum_ticks`),
+    which a coarser output's may miss (at 0.2 Hz the 4.5 plane's first tick came 2 s after
+    its ground window: its truth referred over the whole flight, 27 m off)."""
     order = np.argsort(series.t, kind="stable")
     ts, values = series.t[order], series.value[order]
+    raw = _interpolated(ts, values, referred.t)
+    ground = _interpolated(ts, values, referred.datum_ticks(referred.ground_window_s))
+    ground = ground[np.isfinite(ground)]
+    if not ground.size:
+        ground = raw[np.isfinite(raw)]
+    if not ground.size:
+        return raw
+    level = np.median(ground)
+    h = raw - level
+    t = referred.t
+    for segment in referred.segments:
+        if segment.on_ground_s in (None, referred.on_ground_s):
+            continue  # none of its own, or the main segment's ground (referred above)
+        own = _interpolated(ts, values, referred.datum_ticks(segment.on_ground_s))
+        own = own[np.isfinite(own)]
+        part = (t >= segment.start_s) & (t <= segment.end_s)
+        if own.size:
+            h[part] -= np.median(own - level)
+    return h
+
+
+def _interpolated(ts: FloatArray, values: FloatArray, t: FloatArray) -> FloatArray:
+    """A reference's samples (``ts`` sorted) at the times ``t``: linear, no extrapolation, NaN
+    across a pause in them."""
     inside = (t >= ts[0]) & (t <= ts[-1])
     if ts.size > 1:
         longest = max(REFERENCE_MAX_GAP_S, 5 * float(np.median(np.diff(ts))))
         after = np.clip(np.searchsorted(ts, t), 1, ts.size - 1)
         inside &= ts[after] - ts[after - 1] <= longest
-    h = np.where(inside, np.interp(t, ts, values), np.nan)
-    lo, hi = referred.ground_window_s
-    ground = (t >= lo) & (t <= hi) & np.isfinite(h)
-    if not ground.any():
-        ground = np.isfinite(h)
-    if not ground.any():
-        return h
-    h = h - np.median(h[ground])
-    for segment in referred.segments:
-        if segment.on_ground_s in (None, referred.on_ground_s):
-            continue  # none of its own, or the main segment's ground (referred above)
-        own = (t >= segment.on_ground_s[0]) & (t <= segment.on_ground_s[1]) & np.isfinite(h)
-        part = (t >= segment.start_s) & (t <= segment.end_s)
-        if own.any():
-            h[part] -= np.median(h[own])
-    return np.asarray(h)
+    out: FloatArray = np.where(inside, np.interp(t, ts, values), np.nan)
+    return out
 
 
 #: A simulator's truth is checked against the sensors where either moves: its heights must

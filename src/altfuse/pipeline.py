@@ -186,7 +186,7 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
         takeoffs=sorted((*flight.takeoffs, *detector_takeoffs(_samples(flight.landed)))),
     )
     if fine is not aligned:
-        referred = on_clock(referred, aligned)
+        referred = on_clock(referred, aligned, fine.rate_hz)
     log.info(
         "%s: aligned %d ticks in %.2f s, datum in %.2f s",
         name,
