@@ -303,7 +303,7 @@ def estimate_lag(series: Series, reference: Series) -> Lag:
         return Lag(series.name, reference.name, 0.0, explained, how)
     if explained < LAG_MIN_EXPLAINED:
         how = (
-            f"not estimated: {reference.name} explains {explained:.0%} of its changes "
+            f"not estimated: {reference.name} explains {explained:.1%} of its changes "
             f"(< {LAG_MIN_EXPLAINED:.0%})"
         )
         return Lag(series.name, reference.name, 0.0, explained, how)
