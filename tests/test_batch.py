@@ -14,6 +14,7 @@ import sys
 import time
 import types
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
@@ -389,14 +390,21 @@ def test_skip_existing_redoes_changed_inputs_and_options(tmp_path: Path) -> None
     again = BatchOptions(skip_existing=True)
     assert [r.status for r in run_batch([logs], out, again, jobs=1)] == ["skipped"]
     other = BatchOptions(skip_existing=True, fuse=FuseOptions(method="mean"))
-    # stale outputs (other options) are not overwritten without --force
-    [refused] = run_batch([logs], out, other, jobs=1)
-    assert refused.status == "failed"
-    assert "exists; --force overwrites" in refused.error
+    # stale outputs (other options) are not overwritten without --force: the batch is
+    # refused whole, its summary kept (each log failed alone, its summary row given away)
+    summary = (out / "summary.csv").read_bytes()
+    with pytest.raises(ParameterError, match=r"cannot keep \(method smoother, here mean\)"):
+        run_batch([logs], out, other, jobs=1)
+    with pytest.raises(ParameterError, match=r"cannot keep \(no m.weights.csv\)"):
+        run_batch([logs], out, replace(again, weights=True), jobs=1)
+    assert (out / "summary.csv").read_bytes() == summary
     other = BatchOptions(skip_existing=True, force=True, fuse=FuseOptions(method="mean"))
     assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["ok"]
     assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["skipped"]
     shutil.copy(SAMPLES / "paper_a.bin", logs / "m.bin")  # same name, new content
+    [changed] = run_batch([logs], out, replace(other, force=False), jobs=1)
+    assert changed.status == "failed"  # told by its hash, in its own run
+    assert "not the complete outputs of this log as it is now" in changed.error
     assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["ok"]
     (out / "m.csv").unlink()  # an output lost
     assert [r.status for r in run_batch([logs], out, other, jobs=1)] == ["ok"]
@@ -528,14 +536,14 @@ def test_the_index_says_what_made_each_log_s_outputs(tmp_path: Path) -> None:
     assert first["options"]["fuse"]["method"] == "smoother"
     assert first["logs"]["a.bin"]["outputs"] == ["a.csv", "a.meta.json"]
     assert first["logs"]["a.bin"]["fuse"]["method"] == "smoother"
-    # another method over the same folder without --force: a.bin's outputs are in the way
-    other = BatchOptions(skip_existing=True, fuse=FuseOptions(method="mean"))
-    again = run_batch([logs / "a.bin"], out, other)
+    # a.bin changed since, run again without --force: its outputs are in the way
+    shutil.copy(SAMPLES / "mission.bin", logs / "a.bin")
+    again = run_batch([logs / "a.bin"], out, BatchOptions(skip_existing=True))
     assert [r.status for r in again] == ["failed"]
     index = json.loads((out / "index.json").read_text())
-    assert index["logs"]["a.bin"]["fuse"]["method"] == "smoother"  # what made the files
-    assert index["logs"]["a.bin"]["rerun"]["status"] == "failed"
-    assert index["logs"]["a.bin"]["rerun"]["fuse"]["method"] == "mean"
+    rerun = index["logs"]["a.bin"].pop("rerun")
+    assert index["logs"]["a.bin"] == first["logs"]["a.bin"]  # what made the files there
+    assert rerun["status"] == "failed"
     assert index["logs"]["b.bin"] == first["logs"]["b.bin"]
     run_batch([logs], out, BatchOptions(skip_existing=True), jobs=1, shard=(2, 2))
     shard = json.loads((out / "index.shard-2-of-2.json").read_text())

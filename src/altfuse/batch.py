@@ -12,7 +12,8 @@ One batch at a time writes to an output folder (a lock on the folder); an existi
 
 Resuming: altfuse's temporary files left by an interrupted run are removed at the start; with
 ``skip_existing``, a log whose provenance sidecar exists, names the input's current
-sha256 and the same options, and whose listed outputs all exist, is not run again. Each log's
+sha256 and the same options, and whose listed outputs all exist, is not run again (outputs it
+could neither keep nor overwrite refuse the batch whole, told from the sidecars). Each log's
 outputs are written all-or-nothing with the sidecar renamed last, so an interrupted batch leaves
 complete sets or nothing.
 """
@@ -308,20 +309,49 @@ def plan(
     return jobs
 
 
+def _sidecar(job: Job, options: BatchOptions) -> dict[str, Any] | None:
+    """The provenance record of ``job``'s earlier outputs; None where there is none, or it is
+    damaged (its outputs then complete for nothing)."""
+    meta = job.outputs(options).meta_path
+    try:
+        record = json.loads(meta.read_text(encoding="utf-8")) if meta is not None else None
+    except (OSError, ValueError):
+        return None
+    return record if isinstance(record, dict) else None
+
+
 def is_complete(job: Job, options: BatchOptions) -> bool:
     """Whether ``job``'s outputs exist, complete, for the input as it is now and these options."""
     outputs = job.outputs(options)
-    meta = outputs.meta_path
-    if meta is None or not all(p.exists() for p in outputs.paths()):
+    record = _sidecar(job, options)
+    if record is None or outputs.meta_path is None or not all(p.exists() for p in outputs.paths()):
         return False
     try:
-        record = json.loads(meta.read_text(encoding="utf-8"))
         same_input = record["input"]["sha256"] == sha256_of(job.log)
         same_options = record.get("options") == asdict(options.fuse)
-        listed = [meta.parent / p for p in record["outputs"].values()]
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):  # damaged: redo
+        listed = [outputs.meta_path.parent / p for p in record["outputs"].values()]
+    except (OSError, KeyError, TypeError, AttributeError):  # damaged: redo
         return False
     return same_input and same_options and all(p.exists() for p in listed)
+
+
+def unkept(job: Job, options: BatchOptions) -> str | None:
+    """Why ``job``'s outputs that are there would not be kept as complete for these options,
+    told from their sidecar alone (whether the log changed since needs its hash): no sidecar,
+    other fusion options (``method smoother, here mean``), an output these options add; None
+    where none of these holds."""
+    record = _sidecar(job, options)
+    if record is None:
+        return f"{job.existing(options)[0].name} without its sidecar"
+    made, now = record.get("options"), asdict(options.fuse)
+    if isinstance(made, dict) and made != now:
+        return ", ".join(
+            f"{key} {made.get(key)!r}, here {value!r}".replace("'", "")
+            for key, value in now.items()
+            if made.get(key) != value
+        )
+    missing = [p.name for p in job.outputs(options).paths() if not p.exists()]
+    return f"no {missing[0]}" if missing else None
 
 
 def process(job: Job, options: BatchOptions) -> LogResult:
@@ -333,9 +363,11 @@ def process(job: Job, options: BatchOptions) -> LogResult:
     outputs = job.outputs(options)
     existing = job.existing(options)
     if existing and not options.force:
-        message = (
-            f"{existing[0]} exists; --force overwrites, --skip-existing keeps complete outputs"
-        )
+        kept = "--skip-existing keeps complete outputs"
+        if options.skip_existing:  # they were not: the log changed since, or some are missing
+            kept = "not the complete outputs of this log as it is now (it changed since, or "
+            kept += "outputs are missing)"
+        message = f"{existing[0]} exists, {kept}: --force redoes it"
         return LogResult(name, "failed", message, processing_s=time.perf_counter() - started)
     try:
         done = fuse_to_files(job.log, outputs, options.fuse, label=str(job.relative))
@@ -644,7 +676,7 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
     if shard is not None:
         todo = todo[shard[0] - 1 :: shard[1]]
     out = Path(out_dir)
-    if not (options.force or options.skip_existing):
+    if not options.force:
         _refuse_rerun(todo, options, out)
     summary = out / summary_name(shard)
     client = None if scheduler is None else _dask_client(scheduler)
@@ -669,17 +701,33 @@ def run_batch(  # noqa: PLR0913 (keyword-only beyond the first three: the CLI's 
 
 
 def _refuse_rerun(jobs: Sequence[Job], options: BatchOptions, out: Path) -> None:
-    """A batch run again without ``--force`` or ``--skip-existing`` on logs whose outputs are
-    there is refused as a whole, its summary untouched (each log failing alone, "exists", gave
-    the summary's rows of the earlier run, every metric, away to those failures)."""
+    """A batch run again without ``--force`` on logs whose outputs are there is refused as a
+    whole, its summary untouched (each log failing alone, "exists", gave the summary's rows of
+    the earlier run, every metric, away to those failures): without ``--skip-existing``, any
+    such log; with it, one whose outputs it would neither keep nor may overwrite
+    (:func:`unkept`: no log is hashed here)."""
+    if options.skip_existing:
+        why = {job: unkept(job, options) for job in jobs if job.existing(options)}
+        held = [job for job, reason in why.items() if reason is not None]
+        if held:
+            raise ParameterError(
+                f"{out} holds outputs of {len(held)} of these {len(jobs)} logs "
+                f"({_named(held)}) that --skip-existing cannot keep ({why[held[0]]}): "
+                "--force redoes them, or write to another folder"
+            )
+        return
     held = [job for job in jobs if job.existing(options)]
     if held:
-        named = ", ".join(printable(str(job.relative)) for job in held[:3])
-        more = f" and {len(held) - 3} more" if len(held) > 3 else ""
         raise ParameterError(
-            f"{out} holds the outputs of {len(held)} of these {len(jobs)} logs ({named}{more}):"
-            " --skip-existing keeps the complete ones, --force redoes them"
+            f"{out} holds the outputs of {len(held)} of these {len(jobs)} logs "
+            f"({_named(held)}): --skip-existing keeps the complete ones, --force redoes them"
         )
+
+
+def _named(jobs: Sequence[Job]) -> str:
+    """The first three of ``jobs``' logs, and how many more."""
+    named = ", ".join(printable(str(job.relative)) for job in jobs[:3])
+    return named + (f" and {len(jobs) - 3} more" if len(jobs) > 3 else "")
 
 
 def summary_name(shard: tuple[int, int] | None = None, name: str = SUMMARY) -> str:
