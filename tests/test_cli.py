@@ -262,6 +262,18 @@ def test_single_source_log_with_min_sensors_one(tmp_path: Path) -> None:
     assert set(table.status.dropna()) <= {"single", "none", "diverged"}
 
 
+def test_more_sensors_asked_than_a_log_has_is_one_line(tmp_path: Path) -> None:
+    out = tmp_path / "out.csv"
+    result = run("fuse", SAMPLE_LOG, "-o", out, "--min-sensors", "4")
+    assert_one_line_error(
+        result,
+        1,
+        "mission.bin: 3 usable altitude sources (gps, baro, rangefinder) where min_sensors is "
+        "4; min_sensors 3 (--min-sensors 3) fuses them",
+    )
+    assert not out.exists()
+
+
 def test_skipped_bytes_are_one_warning_line(tmp_path: Path) -> None:
     result = run("fuse", shared_log("ardupilot/rima48_test_cascade.BIN"), "-o", tmp_path / "o.csv")
     assert result.exit_code == 0

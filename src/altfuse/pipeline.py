@@ -120,9 +120,11 @@ def _require_sensors(
         raise NoUsableSensorsError(
             f"{log_name}: no usable altitude source (looked for GPS, barometer, rangefinder){why}"
         )
+    n = len(names)
+    hint = "writes a single source" if n == 1 else "fuses them"
     raise NoUsableSensorsError(
-        f"{log_name}: {len(names)} usable altitude source ({', '.join(names)}) where min_sensors "
-        f"is {options.min_sensors}{why}; min_sensors 1 (--min-sensors 1) writes a single source"
+        f"{log_name}: {n} usable altitude source{'s' * (n > 1)} ({', '.join(names)}) where "
+        f"min_sensors is {options.min_sensors}{why}; min_sensors {n} (--min-sensors {n}) {hint}"
     )
 
 
