@@ -369,6 +369,8 @@ def _write(path: Path, scenario: str, faults: list[str]) -> Path:
     ("args", "fragment"),
     [
         (["mission", "--duration", "5"], "--duration"),
+        # 11.6 days (1e6 s) ran out of a 24 GB machine's memory, killed without a word
+        (["hover", "--duration", "1e7"], "--duration must be at most 43200 s (12 hours)"),
         (["orbit"], "'orbit' is not one of"),
         (["hover", "--fault", "ice"], "'ice' is not one of"),
         (["hover", "--seed", "-1"], "'--seed': -1 is not in the range x>=0"),  # numpy's error
