@@ -16,6 +16,7 @@ from altfuse.fuse import METHODS, FusionInput
 from altfuse.fuse.base import FusionResult, combine
 from altfuse.guard import BRIDGE_S, FLOOR_M, GROSS_M, MIN_S, excursion, guard
 from altfuse.metrics import white_noise_sigma
+from altfuse.model import Samples
 from altfuse.pipeline import FuseOptions, fuse_log
 from conftest import ROOT, SHARED_LOGS, shared_log
 
@@ -75,6 +76,36 @@ def test_a_gross_excursion_is_flagged_however_brief() -> None:
     assert one_tick.result.status[-1] == "diverged"
     below = guard(shifted(inputs, 299, 300, 0.9 * GROSS_M), inputs)
     assert below.record["diverged_ticks"] == 0
+
+
+def test_on_a_coarse_clock_an_estimate_is_held_to_the_sensors_at_its_tick() -> None:
+    """At 0.2 Hz a column is its sensor's mean over 5 s, and an estimate at the tick is not:
+    a climb bending at 2 m/s^2 puts the true height 2 m outside both sensors' means (the
+    smoother's estimates in the truth logs' climbing turns, within 0.3 m of the truth, were
+    flagged 11 m outside them). The samples at the tick hold it, and the means a method that
+    fuses them; a real excursion is still flagged."""
+    fine = np.arange(0.0, 200.0, 0.1)
+    true = 20.0 * np.sin(2 * np.pi * fine / 20.0)  # 20 m up and down every 20 s
+    rng = np.random.default_rng(3)
+    samples = [true + rng.normal(0.0, 0.05, fine.size) for _ in range(2)]
+    t = np.arange(5.0, 195.0, 5.0)
+    cell = np.floor((fine + 2.5) / 5.0).astype(int) - 1  # fine sample's tick, cells +-2.5 s
+    z = np.stack([[v[cell == k].mean() for k in range(t.size)] for v in samples], axis=1)
+    inputs = FusionInput(
+        t, z, ("gps", "baro"), ("gps", "baro"), tuple(Samples(fine, v) for v in samples), 5.0
+    )
+    at_ticks = 20.0 * np.sin(2 * np.pi * t / 20.0)
+    assert np.max(excursion(at_ticks, z)) > 1.5 * FLOOR_M  # what was flagged
+    truth = FusionResult("toy", at_ticks, np.ones(z.shape) / 2, np.full(t.size, "fused"))
+    assert guard(truth, inputs).record["diverged_ticks"] == 0
+    means = FusionResult("toy", z.mean(axis=1), truth.weights, truth.status)  # mean's
+    assert np.max(excursion(means.fused, np.stack(samples, axis=1)[::50][1:-1])) > FLOOR_M
+    assert guard(means, inputs).record["diverged_ticks"] == 0
+    off = at_ticks.copy()
+    off[10:12] += 5.0  # 10 s 5 m above everything either sensor read
+    astray = guard(FusionResult("toy", off, truth.weights, truth.status), inputs)
+    assert astray.record["diverged_ticks"] == 2
+    assert list(np.flatnonzero(astray.result.status == "diverged")) == [10, 11]
 
 
 LOGS = [

@@ -5,15 +5,17 @@ envelope of the valid sensors' heights (0 inside it)::
 
     excursion = max(min_i z_i - fused, fused - max_i z_i, 0)
 
-It is too far when it exceeds ``max(FLOOR_M, SIGMAS * sqrt(s^2 + f^2))``, with ``s`` the white
-noise of the sensor at the envelope's nearer edge (from its own samples' second differences) and
-``f`` the method's own ``fused_std`` where it gives one. A run of such ticks (through pauses
-shorter than ``BRIDGE_S``) lasting ``MIN_S`` or more, or with a tick beyond ``GROSS_M`` (a
-hundred metres outside every sensor is never a filter's overshoot, however brief: a GPS's last
-sample 100 m off at a log's cut), gets the status ``diverged``; so does a tick where a sensor
-is valid and the method gave no value at all (NaN: the smoother's state lost over a day's gap
-in a damaged log's stamps). The value is kept (it is what the method said), the status says
-not to trust it, the provenance counts it and the command line warns in one line.
+(the sensors' columns, or on a clock coarser than the datum's their samples at the tick:
+:func:`sensor_heights`). It is too far when it exceeds ``max(FLOOR_M, SIGMAS * sqrt(s^2 +
+f^2))``, with ``s`` the white noise of the sensor at the envelope's nearer edge (from its own
+samples' second differences) and ``f`` the method's own ``fused_std`` where it gives one. A run
+of such ticks (through pauses shorter than ``BRIDGE_S``) lasting ``MIN_S`` or more, or with a
+tick beyond ``GROSS_M`` (a hundred metres outside every sensor is never a filter's overshoot,
+however brief: a GPS's last sample 100 m off at a log's cut), gets the status ``diverged``; so
+does a tick where a sensor is valid and the method gave no value at all (NaN: the smoother's
+state lost over a day's gap in a damaged log's stamps). The value is kept (it is what the
+method said), the status says not to trust it, the provenance counts it and the command line
+warns in one line.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from altfuse.datum import DATUM_RATE_HZ
 from altfuse.fuse.base import DIVERGED, FusionInput, FusionResult
 from altfuse.metrics import envelope, runs, white_noise_sigma
 from altfuse.model import FloatArray
@@ -60,15 +63,34 @@ def excursion(fused: FloatArray, z: FloatArray) -> FloatArray:
     return np.where(valid & np.isfinite(fused), out, np.nan)
 
 
+def sensor_heights(inputs: FusionInput) -> FloatArray:
+    """The sensors' heights a method's value at each tick is held to, (T, n) or (T, 2n): their
+    columns ``z``; on a clock coarser than the datum's (:data:`~altfuse.datum.DATUM_RATE_HZ`),
+    where a column is its samples' mean over a cell seconds wide, also each sensor's own
+    samples interpolated at the tick (where its column is valid, in the same order after the
+    columns): a method fusing the columns gives a cell's mean, the smoother an estimate at the
+    tick. Against the 5 s means alone at 0.2 Hz the smoother's estimates in the planes'
+    climbing turns, within 0.3 m of the truth, lay up to 11 m outside every sensor; against
+    the samples alone, mean's."""
+    if inputs.dt_s * DATUM_RATE_HZ <= 1.0 + 1e-9:
+        return inputs.z
+    at_ticks = np.full(inputs.z.shape, np.nan)
+    for j, s in enumerate(inputs.samples):
+        if s.t.size:
+            valid = np.isfinite(inputs.z[:, j])
+            at_ticks[valid, j] = np.interp(inputs.t[valid], s.t, s.value)
+    return np.concatenate([inputs.z, at_ticks], axis=1)
+
+
 def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
     """``result`` with the ticks of every divergence (see the module doc) flagged ``diverged``."""
-    z, fused = inputs.z, result.fused
+    z, fused = sensor_heights(inputs), result.fused
     away = excursion(fused, z)
     noise = np.array(
         [white_noise_sigma(s.value) if s.value.size > 2 else 0.0 for s in inputs.samples]
     )
     edge = _edge_sensor(fused, z)
-    s = np.where(edge >= 0, noise[np.maximum(edge, 0)], 0.0)
+    s = np.where(edge >= 0, noise[np.maximum(edge, 0) % noise.size], 0.0)
     f = result.tick_traces.get("fused_std", np.zeros(fused.size))
     limit = np.maximum(FLOOR_M, SIGMAS * np.sqrt(s**2 + np.nan_to_num(f) ** 2))
     beyond = _bridged(np.nan_to_num(away) > limit, round(BRIDGE_S / inputs.dt_s))
