@@ -112,6 +112,15 @@ def test_disjoint_sensors_have_no_overlap() -> None:
         align([a, b], span="overlap")
 
 
+def test_a_span_shorter_than_a_tick_says_so() -> None:
+    """pymavlink's 0.8 s test log at 0.2 Hz: 'the altitude sources hold no time span to
+    resample', though they hold 0.8 s."""
+    a = series("baro", np.arange(81.9, 82.7, 0.1), np.ones(8))
+    message = r"union spans 0.7 s \(81.9-82.6 s\), between two ticks of a 0.2 Hz clock; raise"
+    with pytest.raises(NoUsableSensorsError, match=message):
+        align([a], rate_hz=0.2)
+
+
 def climb_profile(t: np.ndarray) -> np.ndarray:
     """Climbs and descents at up to 3 m/s, with a wobble: a flight whose rates tell a lag."""
     return 40 * (1 - np.cos(2 * np.pi * t / 60)) + 2 * np.sin(2 * np.pi * t / 7)

@@ -163,8 +163,9 @@ def make_grid(series: Sequence[Series], rate_hz: float, span: Span) -> FloatArra
     if last < first:
         raise NoUsableSensorsError(
             "the altitude sources do not overlap in time; try --span union"
-            if span == "overlap"
-            else "the altitude sources hold no time span to resample"
+            if start > end
+            else f"the altitude sources' {span} spans {end - start:.3g} s ({start:.1f}-"
+            f"{end:.1f} s), between two ticks of a {rate_hz:g} Hz clock; raise --rate"
         )
     return np.arange(first, last + 1, dtype=np.float64) / rate_hz
 
