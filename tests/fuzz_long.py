@@ -4,8 +4,9 @@ Run on demand (about 2 minutes for 2,000 variants on 2 cores):
 
     python tests/fuzz_long.py [--variants 2000] [--seed 1] [--workers 2]
 
-Each variant is a base log (every log in ../shared/logs/ardupilot and sample_logs/) with one to
-three random mutations (tests/fuzzing.py), fused by the command line (``altfuse fuse``, in
+Each variant is a base log (every log in ../shared/logs/ardupilot and sample_logs/, and the PX4
+ULogs in ../shared/logs/px4, which take the byte-level mutations alone) with one to three
+random mutations (tests/fuzzing.py), fused by the command line (``altfuse fuse``, in
 process) with a random method, in a worker process with a 30 s limit per variant and a 4 GiB
 address-space limit. The allowed outcomes are a valid output or a documented error (exit 1 or 2
 with one line on stderr and no file written). Anything else is a failure, printed with the seed
@@ -37,14 +38,14 @@ import pandas as pd
 from click.testing import CliRunner
 
 from altfuse.cli import cli
-from fuzzing import MUTATIONS, Records, variant
+from fuzzing import BYTE_LEVEL, MUTATIONS, Records, variant
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT_S = 30
 MEMORY_BYTES = 4 << 30
 METHODS = ("smoother", "support", "mean", "delay2", "multilayer")
 EXCURSION_M = 100.0
-_BASES: dict[str, tuple[bytes, Records]] = {}
+_BASES: dict[str, tuple[bytes, Records | None]] = {}
 
 
 class Hang(BaseException):  # past the command's own handling of Exception
@@ -63,10 +64,12 @@ def _init() -> None:
 def run_one(base: str, names: list[str], seed: int, method: str) -> tuple[str, str]:
     """(outcome kind, detail) for one variant."""
     if base not in _BASES:
-        _BASES[base] = (Path(base).read_bytes(), Records(Path(base)))
+        records = None if _is_ulog(base) else Records(Path(base))
+        _BASES[base] = (Path(base).read_bytes(), records)
     data, records = _BASES[base]
     with tempfile.TemporaryDirectory() as tmp:
-        log, out = Path(tmp) / "damaged.bin", Path(tmp) / "out.csv"
+        log = Path(tmp) / ("damaged.ulg" if records is None else "damaged.bin")
+        out = Path(tmp) / "out.csv"
         log.write_bytes(variant(data, records, names, seed))
         signal.alarm(LIMIT_S)
         try:
@@ -77,8 +80,12 @@ def run_one(base: str, names: list[str], seed: int, method: str) -> tuple[str, s
             signal.alarm(0)
         if isinstance(result.exception, MemoryError):
             return "FAIL memory", f"over {MEMORY_BYTES >> 30} GiB"
-        left = sorted(p.name for p in Path(tmp).iterdir())
+        left = sorted(p.name for p in Path(tmp).iterdir() if p != log)
         return judge(result.exit_code, result.stderr.strip().splitlines(), out, left)
+
+
+def _is_ulog(base: str) -> bool:
+    return base.lower().endswith(".ulg")
 
 
 def judge(code: int, lines: list[str], out: Path, left: list[str]) -> tuple[str, str]:
@@ -91,12 +98,12 @@ def judge(code: int, lines: list[str], out: Path, left: list[str]) -> tuple[str,
             return f"FAIL exit {code}", last
         if len(lines) != 1 or not lines[0].startswith("altfuse: error: "):
             return "FAIL stderr lines", " | ".join(lines)[:200]
-        if left != ["damaged.bin"]:
+        if left:
             return "FAIL partial output", ", ".join(left)
         return f"error {code}", last
     if len(lines) > 3 or not all(line.startswith("altfuse: warning: ") for line in lines):
         return "FAIL stderr lines", " | ".join(lines)[:200]
-    if left != ["damaged.bin", "out.csv", "out.meta.json"]:
+    if left != ["out.csv", "out.meta.json"]:
         return "FAIL stray file", ", ".join(left)
     return check_csv(pd.read_csv(out))
 
@@ -132,13 +139,16 @@ def main() -> int:
     args = parser.parse_args()
     bases = sorted((ROOT / "sample_logs").glob("*.bin"))
     bases += sorted(p for p in (args.shared / "ardupilot").glob("*") if p.is_file())
+    bases += sorted((args.shared / "px4").glob("*.ulg"))
     rng = np.random.default_rng(args.seed)
     jobs = []
     for _ in range(args.variants):
-        names = list(rng.choice(sorted(MUTATIONS), int(rng.integers(1, 4))))
+        base = str(bases[int(rng.integers(len(bases)))])
+        kinds = sorted(BYTE_LEVEL if _is_ulog(base) else MUTATIONS)
+        names = list(rng.choice(kinds, int(rng.integers(1, 4))))
         jobs.append(
             (
-                str(bases[int(rng.integers(len(bases)))]),
+                base,
                 names,
                 int(rng.integers(2**32)),
                 str(rng.choice(METHODS)),

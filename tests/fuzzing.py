@@ -333,7 +333,13 @@ MUTATIONS: dict[str, Mutation] = {
 }
 
 
-def variant(base: bytes, records: Records, names: list[str], seed: int) -> bytes:
+#: The mutations that know nothing of a format's records: the ones a PX4 ULog takes.
+BYTE_LEVEL = ("truncate", "flip", "zero", "duplicate", "garbage")
+
+
+def variant(base: bytes, records: Records | None, names: list[str], seed: int) -> bytes:
+    """``base`` with the mutations ``names`` (the record-aware first), drawn from ``seed``;
+    ``records``: the base's (None for a ULog, which takes the byte-level ones alone)."""
     rng = np.random.default_rng(seed)
     data = base
     order = sorted(

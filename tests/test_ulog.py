@@ -4,6 +4,9 @@ refused in one line, the simulator's truth checked before it is used."""
 from __future__ import annotations
 
 import re
+import struct
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -209,6 +212,25 @@ def test_a_truncated_or_broken_ulog_is_one_line(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["fuse", str(half), "-o", str(tmp_path / "half.csv")])
     assert result.exit_code == 0, result.output  # read up to the cut
     assert half.read_bytes() == source[: len(source) // 2]  # the input untouched
+
+
+def test_damage_that_sends_pyulog_back_without_end_is_one_line(tmp_path: Path) -> None:
+    """A message claiming 10,240 bytes 3 bytes before the end: pyulog steps back by the
+    length it asked for, not by what it read, 10 kB before where it began, and reads the same
+    zeros again without end (damaged logs of the fuzz: over 300 s). Run apart, so that the
+    old reader fails the test rather than hanging the suite."""
+    header = b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0)
+    log = tmp_path / "loops.ulg"
+    log.write_bytes(header + bytes(12_000) + bytes([0x00, 0x28, 0x00]))
+    out = tmp_path / "x.csv"
+    command = [sys.executable, "-m", "altfuse", "fuse", str(log), "-o", str(out)]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 1
+    assert done.stderr == (
+        f"altfuse: error: {log}: not a readable ULog file (pyulog's reading of its damage did "
+        "not end: stopped after 4 reads per byte of the file)\n"
+    )
+    assert not out.exists()
 
 
 def test_a_log_with_no_take_off_knows_its_datum() -> None:

@@ -34,11 +34,12 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from importlib.metadata import version
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -177,6 +178,48 @@ def read_ulog(path: str | Path) -> FlightLog:
     )
 
 
+#: The most reads pyulog may make of a file, per byte of it (and beside them): a parse reads
+#: each message once, two reads (0.02-0.05 a byte on the shared logs), and a corrupt stretch a
+#: byte at a time (0.99 on the one that has one). Where its damage ends a message's claimed
+#: length past the file's end, pyulog steps back by that length rather than by what it read,
+#: before where it started, and reads the same bytes again without end (a 12 kB file, the
+#: fuzz's damaged logs: over 300 s before they were stopped).
+READS_PER_BYTE = 4
+READS_BESIDE = 10_000
+
+
+class _Endless(Exception):
+    """pyulog's parse of a file went past its reads' budget (not one of the errors its own
+    parsing catches and goes on from)."""
+
+
+class _Budgeted:
+    """A binary file as pyulog reads it (``read``, ``seek``, ``tell``, ``close``), that stops
+    the parse past ``READS_PER_BYTE`` reads per byte of the file."""
+
+    def __init__(self, handle: BinaryIO, size: int) -> None:
+        self._handle = handle
+        self._left = READS_PER_BYTE * size + READS_BESIDE
+
+    def read(self, n: int = -1) -> bytes:
+        self._left -= 1
+        if self._left < 0:
+            raise _Endless(
+                "pyulog's reading of its damage did not end: stopped after "
+                f"{READS_PER_BYTE} reads per byte of the file"
+            )
+        return self._handle.read(n)
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self._handle.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._handle.tell()
+
+    def close(self) -> None:
+        self._handle.close()
+
+
 def _parse(path: Path) -> tuple[Any, list[str]]:
     """pyulog's decoding of the topics altfuse reads, and what it printed meanwhile (its
     warnings on a corrupt file go to standard output, where a CSV may be going)."""
@@ -185,7 +228,8 @@ def _parse(path: Path) -> tuple[Any, list[str]]:
     captured = io.StringIO()
     try:  # the file opened here: pyulog leaves its own handle open when it raises
         with path.open("rb") as handle, contextlib.redirect_stdout(captured):
-            ulog = ULog(handle, list(TOPICS))
+            size = os.fstat(handle.fileno()).st_size
+            ulog = ULog(_Budgeted(handle, size), list(TOPICS))
     except OSError as exc:
         raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
     except Exception as exc:  # pyulog raises what its parsing meets (struct.error, ...)
