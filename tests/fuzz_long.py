@@ -5,17 +5,17 @@ Run on demand (about 2 minutes for 2,000 variants on 2 cores):
     python tests/fuzz_long.py [--variants 2000] [--seed 1] [--workers 2]
 
 Each variant is a base log (every log in ../shared/logs/ardupilot and sample_logs/, and the PX4
-ULogs in ../shared/logs/px4, which take the byte-level mutations alone) with one to three
-random mutations (tests/fuzzing.py), fused by the command line (``altfuse fuse``, in
+ULogs in ../shared/logs/px4, which take the byte-level mutations and damage to their values) with
+one to three random mutations (tests/fuzzing.py), fused by the command line (``altfuse fuse``, in
 process) with a random method, in a worker process with a 30 s limit per variant and a 4 GiB
 address-space limit. The allowed outcomes are a valid output or a documented error (exit 1 or 2
 with one line on stderr and no file written). Anything else is a failure, printed with the seed
 that reproduces it, and makes the exit code 1: exit 3 (a bug), a hang, runaway memory, a second
 line on stderr (a success may print at most three warning lines: what reading left out, a
 divergence, and the smoother's failed model check), a partial output or a temporary file left
-behind, and in the CSV an infinite number, a missing fused value where the status says fused,
-or a fused value more than 100 m outside every sensor (below the lowest or above the highest)
-at a tick not flagged ``diverged``.
+behind, and in the CSV an infinite number, a missing fused value where the status says fused, or a
+fused value more than 100 m outside every sensor (below the lowest or above the highest) at a tick
+not flagged ``diverged``.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ import pandas as pd
 from click.testing import CliRunner
 
 from altfuse.cli import cli
-from fuzzing import BYTE_LEVEL, MUTATIONS, Records, variant
+from fuzzing import MUTATIONS, ULOG_MUTATIONS, Records, variant
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT_S = 30
@@ -144,7 +144,7 @@ def main() -> int:
     jobs = []
     for _ in range(args.variants):
         base = str(bases[int(rng.integers(len(bases)))])
-        kinds = sorted(BYTE_LEVEL if _is_ulog(base) else MUTATIONS)
+        kinds = sorted(ULOG_MUTATIONS if _is_ulog(base) else MUTATIONS)
         names = list(rng.choice(kinds, int(rng.integers(1, 4))))
         jobs.append(
             (
@@ -156,7 +156,7 @@ def main() -> int:
         )
     started = time.perf_counter()
     outcomes: Counter[str] = Counter()
-    by_mutation: dict[str, Counter[str]] = {m: Counter() for m in MUTATIONS}
+    by_mutation: dict[str, Counter[str]] = {m: Counter() for m in {**MUTATIONS, **ULOG_MUTATIONS}}
     failures = []
     with ProcessPoolExecutor(args.workers, initializer=_init) as pool:
         for job, (kind, detail) in zip(

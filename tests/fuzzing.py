@@ -7,11 +7,14 @@ Columns lists that do not match, a field's type changed, non-finite and extreme 
 numeric field, 14 kinds of timestamp damage, and values frozen over a run of records. Record
 boundaries and layouts come from altfuse's own index of the (undamaged) base log; the
 record-aware mutations apply to the base log's bytes (run them first: a mutation before them
-would move the records).
+would move the records). A PX4 ULog takes the byte-level ones and damage to the values of the
+topics altfuse reads (through pyulog, which writes it again).
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 from collections.abc import Callable
 from pathlib import Path
 
@@ -19,6 +22,7 @@ import numpy as np
 
 from altfuse.io.fastdf import FMT_TYPE, Format, index_file
 from altfuse.io.framing import HEADER
+from altfuse.io.ulog import TOPICS
 
 Mutation = Callable[[bytes, np.random.Generator, "Records"], bytes]
 
@@ -311,9 +315,49 @@ def frozen(data: bytes, rng: np.random.Generator, rec: Records) -> bytes:
     return out.tobytes()
 
 
+def ulog_values(data: bytes, rng: np.random.Generator, _: Records) -> bytes:
+    """A PX4 ULog's numeric field of a topic altfuse reads, over a run of its samples: set to
+    a non-finite or extreme value (an integer field's extremes), 0, negated, frozen, reversed
+    or shuffled; the log written again by pyulog (the topics altfuse reads alone)."""
+    from pyulog import ULog
+
+    try:  # its warnings on a corrupt base said once by the run itself, not per variant
+        with contextlib.redirect_stdout(io.StringIO()):
+            ulog = ULog(io.BytesIO(data), list(TOPICS))
+    except Exception:  # not a ULog pyulog parses: left as it is
+        return data
+    fields = [(d, k) for d in ulog.data_list for k, v in d.data.items() if v.dtype.kind in "fiu"]
+    if not fields:
+        return data
+    topic, name = fields[int(rng.integers(len(fields)))]
+    v = topic.data[name].copy()
+    a = int(rng.integers(v.size))
+    run = slice(a, int(rng.integers(a + 1, v.size + 1)))
+    how = ("extreme", "zero", "negated", "frozen", "reversed", "shuffled")[int(rng.integers(6))]
+    if how == "extreme" and v.dtype.kind == "f":
+        v[run] = np.array(_EXTREMES[int(rng.integers(len(_EXTREMES)))]).astype(v.dtype)
+    elif how == "extreme":
+        info = np.iinfo(v.dtype)
+        v[run] = (info.max, info.min)[int(rng.integers(2))]
+    elif how == "zero":
+        v[run] = 0
+    elif how == "negated":
+        v[run] = -v[run] if v.dtype.kind != "u" else v[run][::-1]
+    elif how == "frozen":
+        v[run] = v[a]
+    elif how == "reversed":
+        v[run] = v[run][::-1].copy()
+    else:
+        rng.shuffle(v[run])
+    topic.data[name] = v
+    out = io.BytesIO()
+    ulog.write_ulog(out)
+    return out.getvalue()
+
+
 #: The mutations that need the base log's record layout untouched (applied first).
 RECORD_AWARE = ("extreme", "timestamps", "frozen", "fmt-type", "fmt-absurd", "fmt-columns",
-                "fmt-redefine")  # fmt: skip
+                "fmt-redefine", "ulog-values")  # fmt: skip
 
 MUTATIONS: dict[str, Mutation] = {
     "truncate": truncate,
@@ -333,13 +377,17 @@ MUTATIONS: dict[str, Mutation] = {
 }
 
 
-#: The mutations that know nothing of a format's records: the ones a PX4 ULog takes.
-BYTE_LEVEL = ("truncate", "flip", "zero", "duplicate", "garbage")
+#: The mutations a PX4 ULog takes: those that know nothing of a format's records, and its own
+#: fields' values.
+ULOG_MUTATIONS: dict[str, Mutation] = {
+    **{n: MUTATIONS[n] for n in ("truncate", "flip", "zero", "duplicate", "garbage")},
+    "ulog-values": ulog_values,
+}
 
 
 def variant(base: bytes, records: Records | None, names: list[str], seed: int) -> bytes:
     """``base`` with the mutations ``names`` (the record-aware first), drawn from ``seed``;
-    ``records``: the base's (None for a ULog, which takes the byte-level ones alone)."""
+    ``records``: the base's (None for a ULog, which takes ``ULOG_MUTATIONS`` alone)."""
     rng = np.random.default_rng(seed)
     data = base
     order = sorted(
@@ -347,5 +395,5 @@ def variant(base: bytes, records: Records | None, names: list[str], seed: int) -
         key=lambda n: (n not in RECORD_AWARE, RECORD_AWARE.index(n) if n in RECORD_AWARE else 0),
     )
     for name in order:
-        data = MUTATIONS[name](data, rng, records)
+        data = {**MUTATIONS, **ULOG_MUTATIONS}[name](data, rng, records)  # type: ignore[arg-type]
     return data

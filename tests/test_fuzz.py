@@ -94,7 +94,7 @@ def fused_and_judged(data: bytes, *args: str) -> tuple[str, str]:
             result.exit_code,
             result.stderr.strip().splitlines(),
             out,
-            sorted(p.name for p in Path(tmp).iterdir()),
+            sorted(p.name for p in Path(tmp).iterdir() if p != log),
         )
 
 
