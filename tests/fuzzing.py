@@ -383,6 +383,7 @@ ULOG_MUTATIONS: dict[str, Mutation] = {
     **{n: MUTATIONS[n] for n in ("truncate", "flip", "zero", "duplicate", "garbage")},
     "ulog-values": ulog_values,
 }
+_EVERY = {**MUTATIONS, **ULOG_MUTATIONS}
 
 
 def variant(base: bytes, records: Records | None, names: list[str], seed: int) -> bytes:
@@ -395,5 +396,5 @@ def variant(base: bytes, records: Records | None, names: list[str], seed: int) -
         key=lambda n: (n not in RECORD_AWARE, RECORD_AWARE.index(n) if n in RECORD_AWARE else 0),
     )
     for name in order:
-        data = {**MUTATIONS, **ULOG_MUTATIONS}[name](data, rng, records)  # type: ignore[arg-type]
+        data = _EVERY[name](data, rng, records)  # type: ignore[arg-type]
     return data

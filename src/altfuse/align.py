@@ -146,12 +146,18 @@ def resample(
     return out, stats
 
 
+def tick_range(start: float, end: float, rate_hz: float) -> tuple[int, int]:
+    """The first and last ``k`` of the ticks ``k / rate_hz`` within ``start`` .. ``end`` [s]
+    (a bound that is a tick, to rounding, counts as one); last < first where none is."""
+    return math.ceil(start * rate_hz - 1e-9), math.floor(end * rate_hz + 1e-9)
+
+
 def make_grid(series: Sequence[Series], rate_hz: float, span: Span) -> FloatArray:
     """Ticks ``k / rate_hz`` covering the union or the overlap of the series' time ranges."""
     starts = [float(s.t.min()) for s in series]
     ends = [float(s.t.max()) for s in series]
     start, end = (min(starts), max(ends)) if span == "union" else (max(starts), min(ends))
-    first, last = math.ceil(start * rate_hz - 1e-9), math.floor(end * rate_hz + 1e-9)
+    first, last = tick_range(start, end, rate_hz)
     cap = tick_cap(series)
     if last - first + 1 > cap:
         hours = (end - start) / 3600

@@ -321,15 +321,16 @@ def _sidecar(job: Job, options: BatchOptions) -> dict[str, Any] | None:
 
 
 def is_complete(job: Job, options: BatchOptions) -> bool:
-    """Whether ``job``'s outputs exist, complete, for the input as it is now and these options."""
-    outputs = job.outputs(options)
+    """Whether ``job``'s outputs exist, complete, for the input as it is now and these options:
+    nothing its sidecar says keeps them from being kept (:func:`unkept`), it names these very
+    options and the input's sha256, and every output it lists is there."""
     record = _sidecar(job, options)
-    if record is None or outputs.meta_path is None or not all(p.exists() for p in outputs.paths()):
+    if record is None or _unkept(job, options, record) is not None:
         return False
     try:
         same_input = record["input"]["sha256"] == sha256_of(job.log)
         same_options = record.get("options") == asdict(options.fuse)
-        listed = [outputs.meta_path.parent / p for p in record["outputs"].values()]
+        listed = [job.stem.parent / p for p in record["outputs"].values()]
     except (OSError, KeyError, TypeError, AttributeError):  # damaged: redo
         return False
     return same_input and same_options and all(p.exists() for p in listed)
@@ -343,6 +344,11 @@ def unkept(job: Job, options: BatchOptions) -> str | None:
     record = _sidecar(job, options)
     if record is None:
         return f"{job.existing(options)[0].name} without its sidecar"
+    return _unkept(job, options, record)
+
+
+def _unkept(job: Job, options: BatchOptions, record: dict[str, Any]) -> str | None:
+    """:func:`unkept` given the sidecar's ``record``."""
     made, now = record.get("options"), asdict(options.fuse)
     if isinstance(made, dict) and made != now:
         return ", ".join(

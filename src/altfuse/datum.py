@@ -48,7 +48,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from altfuse.align import Aligned, merge_duplicates
+from altfuse.align import Aligned, merge_duplicates, tick_range
 from altfuse.errors import NoUsableSensorsError
 from altfuse.inertial import G
 from altfuse.metrics import MAD_TO_SIGMA, running_median, runs
@@ -314,9 +314,8 @@ class Referred:
         lo, hi = span
         if self.datum_rate_hz is None:
             return self.t[(self.t >= lo) & (self.t <= hi)]
-        rate = self.datum_rate_hz  # its ticks k / rate (a bound on one: k to the ulp)
-        first, last = math.ceil(lo * rate - 1e-6), math.floor(hi * rate + 1e-6)
-        ticks: FloatArray = np.arange(first, last + 1) / rate
+        first, last = tick_range(lo, hi, self.datum_rate_hz)  # its ticks, as the clock's own
+        ticks: FloatArray = np.arange(first, last + 1) / self.datum_rate_hz
         return ticks
 
     @property
