@@ -1027,14 +1027,16 @@ def _robust_fit(
     standard deviation ``prior[j]`` on coefficient ``j`` (``inf``: none), refitted twice
     without the residuals beyond 3 sigma (and ``SCALE_MIN_OUTLIER_M``), and their standard
     errors, the residuals' variance counted ``per_independent`` times (correlated residuals:
-    rows per independent one); None when too few rows are left or the design cannot tell the
+    rows per independent one); a rejection that would leave fewer than SCALE_MIN_CHANGES rows
+    is not made (the fit before it stands); None with fewer rows than that or where the design
+    cannot tell the
     coefficients."""
+    if y.size < SCALE_MIN_CHANGES:
+        return None
     keep = np.ones(y.size, dtype=bool)
     precision = np.diag(1.0 / np.asarray(prior, dtype=np.float64) ** 2)
     sigma = math.inf  # the first fit has no prior to weigh against
     for _ in range(4):
-        if keep.sum() < SCALE_MIN_CHANGES:
-            return None
         a, b = design[keep], y[keep]
         weight = 0.0 if math.isinf(sigma) else 1.0 / max(sigma, 1e-6) ** 2
         normal = weight * a.T @ a + precision if weight else a.T @ a
@@ -1043,7 +1045,10 @@ def _robust_fit(
         coef = np.linalg.solve(normal, (weight or 1.0) * a.T @ b)
         r = y - design @ coef
         sigma = max(MAD_TO_SIGMA * float(np.median(np.abs(r[keep] - np.median(r[keep])))), 1e-6)
-        keep = np.abs(r) <= max(3.0 * sigma, SCALE_MIN_OUTLIER_M)
+        inside = np.abs(r) <= max(3.0 * sigma, SCALE_MIN_OUTLIER_M)
+        if inside.sum() < SCALE_MIN_CHANGES:  # too few rows to refit on: this fit stands
+            break
+        keep = inside
     n, p = int(keep.sum()), design.shape[1]
     if n <= p + 1:
         return None
