@@ -53,7 +53,7 @@ from altfuse.errors import NoUsableSensorsError
 from altfuse.inertial import G
 from altfuse.metrics import MAD_TO_SIGMA, running_median, runs
 from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Samples, SensorKind, Series
-from altfuse.steps import Step, find_steps
+from altfuse.steps import STEP_WINDOWS_S, Step, find_steps
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
 MIN_WINDOW_TICKS = 3
@@ -256,6 +256,8 @@ class Scale:
     how: str
     applied: bool
     wind: Wind | None = None
+    # the fit on the heights' changes alone, where it was made: its scale and standard error
+    changes: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -667,14 +669,17 @@ def _refer_segment(
         window, ground_how, ground_s, ref, told.clearances, real, takeoff if real else None
     )
     offsets, h, dropped = _refer(aligned, ground, {})
-    referred = sorted(offsets)
-    steps = find_steps(
-        t, h[:, referred], [aligned.names[i] for i in referred],
-        [aligned.kinds[i] for i in referred],
-    )  # fmt: skip
+    steps = _steps(aligned, h, offsets)
     wind = None
     if referral == "full":
         scales = baro_scales(aligned, h, offsets, steps, told.track)
+        # in a climb a barometer's scale hides a step from the lines either side of it, and the
+        # step moves the scale's fit on the heights; not the fit on their changes, which has
+        # one change across it: sought again on the heights that fit's scales refer
+        again = _steps(aligned, _refer(aligned, ground, _on_changes(scales))[1], offsets)
+        if again != steps:
+            steps = _either_search(steps, again)
+            scales = baro_scales(aligned, h, offsets, steps, told.track)
         wind = max(
             (sc.wind for sc in scales.values() if sc.wind is not None),
             key=lambda w: w.sigmas,
@@ -708,6 +713,31 @@ def _refer_segment(
         detected=detected,
         wind=wind,
     )
+
+
+def _steps(aligned: Aligned, h: FloatArray, offsets: dict[int, Offset]) -> tuple[Step, ...]:
+    """The steps between the referred sources' heights ``h`` (:func:`altfuse.steps.find_steps`;
+    ``offsets``: those referred)."""
+    referred = sorted(offsets)
+    names, kinds = [aligned.names[i] for i in referred], [aligned.kinds[i] for i in referred]
+    return find_steps(aligned.t, h[:, referred], names, kinds)
+
+
+def _either_search(first: Sequence[Step], again: Sequence[Step]) -> tuple[Step, ...]:
+    """The steps of two searches, by time: ``again``'s, and each of ``first``'s that ``again``
+    has not between the same sensors within STEP_WINDOWS_S[0] or their gaps. A step across a
+    climb's gap measured against the barometer's scale is seconds of the climb off in size
+    (the 3.3 plane's GPS regained 2 m higher after 10 s: -6.0 m), but it is there."""
+
+    def found(s: Step) -> bool:
+        near = max(STEP_WINDOWS_S[0], s.half_width_s)
+        return any(
+            {a.first, a.second} == {s.first, s.second}
+            and abs(a.time_s - s.time_s) <= max(near, a.half_width_s)
+            for a in again
+        )
+
+    return tuple(sorted([*again, *(s for s in first if not found(s))], key=lambda s: s.time_s))
 
 
 def _refer(
@@ -856,6 +886,19 @@ def baro_scales(
     }
 
 
+def _on_changes(scales: dict[int, Scale]) -> dict[int, Scale]:
+    """``scales`` with each barometer's fit on the changes (:func:`_scale`) applied where it is
+    a scale that fit could apply: its standard error within MAX_SCALE_STD and its value in
+    SCALE_RANGE."""
+    out = {}
+    for i, sc in scales.items():
+        if sc.changes is not None:
+            scale, std = sc.changes
+            if std <= MAX_SCALE_STD and SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
+                out[i] = replace(sc, scale=scale, applied=True)
+    return out
+
+
 def _in_time(t: FloatArray, valid: npt.NDArray[np.bool_]) -> tuple[FloatArray, float]:
     """A level fit's time column [min from the first ``valid`` tick, a drift's regressor], and
     its rows per independent one: the GPS's wander correlates the residuals, one independent
@@ -918,17 +961,19 @@ def _scale(
         return Scale(1.0, None, reference, "not estimated: no vertical range", False)
     scale = float(fit[0][0])
     std = max(float(fit[1][0]), float(change[1][0]))
+    by_changes = (float(change[0][0]), float(change[1][0]))
     beside = (" beside its dynamic pressure" + (f" in {wind}" if wind else "")) if told else ""
     label = f"{scale:.4f} +- {std:.4f} against {reference}{beside}"
     if not std <= MAX_SCALE_STD:
         how = f"not applied: {label}: too little vertical range to tell"
-        return Scale(scale, std, reference, how, False, wind)
+        return Scale(scale, std, reference, how, False, wind, by_changes)
     if abs(scale - 1.0) < SCALE_MIN_SIGMAS * std:
         how = f"not applied: {label}: not different from 1"
-        return Scale(scale, std, reference, how, False, wind)
+        return Scale(scale, std, reference, how, False, wind, by_changes)
     if not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1]:
-        return Scale(scale, std, reference, f"not applied: {label}: implausible", False, wind)
-    return Scale(scale, std, reference, f"{label} over the flight", True, wind)
+        how = f"not applied: {label}: implausible"
+        return Scale(scale, std, reference, how, False, wind, by_changes)
+    return Scale(scale, std, reference, f"{label} over the flight", True, wind, by_changes)
 
 
 #: A least-squares problem for :func:`_robust_fit`: design, observations, priors, rows per

@@ -26,15 +26,18 @@ one far beyond them counts. A step is kept where it is ``STEP_SIGMAS`` of that a
 Measured: none on the 13 truth logs; none on the real logs shared but in one crash's last
 seconds (rima48: 1.5 and 4.0 m); on altfuse's sample flights a GPS glitch (13.6 and 14.0 m in
 and out: the size is read on the clock, where the spline smears a 5 Hz GPS's 15 m jump) and Paper
-A's scattering GPS (2.9 m). A 1 m step injected half-way: found on 11 of the 13 truth logs
-(barometer, and GPS): the 3.3 plane's barometer is 0.62 m noisy, the 4.5 plane's step is 0.76
-m beside barometers 0.11 m noisy, neither 10 sigma; the 137 m flight's two barometers step
+A's scattering GPS (2.9 m). A 1 m step injected half-way: found on 12 of the 13 truth logs
+(barometer, and GPS): the 3.3 plane's barometer is 0.62 m noisy, not 10 sigma; the 4.5
+plane's, 5 % high in a climb whose rate swings, only on the heights its scale refers, as
+:func:`altfuse.datum.refer_to_takeoff` seeks them again (on the heights referred by offsets,
+0.76 m, with steps of 0.17 m all along); the 137 m flight's two barometers step
 2.8 s into a 13 s loss of its GPS, found across it (``Step.half_width_s``: anywhere in the
 gap; :func:`jump_instant`, where a sensor's own heights say when). Across a gap of one sensor
 of up to
 ``STEP_GAP_S`` (a GPS lost and regained elsewhere) the lines are drawn to its middle: with one
-sensor lost for 10 s from half-way and 2 m higher after (``regain-gps``, ``regain-baro``), the
-smoother within the bar on 12 and 11 of the 13 truth logs, where it was 11 and 6. Not across a
+sensor lost for 10 s from half-way and 2 m higher after (``regain-gps``, ``regain-baro``),
+found on 13 and 12 of the 13 truth logs, the smoother within the bar on 13 and 12, where it
+was 11 and 6 before lines were drawn across gaps. Not across a
 pause of the log (both lost): a real flight logged 18 times over, its crash's last seconds
 and the next copy's start read as 17 steps of 3.6 m, and the smoother took them for the GPS's
 jumps, 25,446 ticks diverged.

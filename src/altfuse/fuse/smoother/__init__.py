@@ -207,8 +207,8 @@ the steps at one instant, as one event) is tried as either sensor's jump
 sensor); the one whose samples are the likelier is taken, its samples after the step moved back
 by it and its offset let jump (``JUMP_SIGMAS`` times the step over ``JUMP_HALF_WIDTH_S``);
 where neither is, both offsets may jump. Recorded as ``steps`` (time, the jump, whose). On the
-truth logs with one sensor stepped 1 m half-way, within the bar on 9 and 13 of 13 (barometer,
-GPS) where it was 7 and 12; lost for 10 s and regained 2 m higher, 11 and 12 where it was 6
+truth logs with one sensor stepped 1 m half-way, within the bar on 10 and 13 of 13 (barometer,
+GPS) where it was 7 and 12; lost for 10 s and regained 2 m higher, 12 and 13 where it was 6
 and 11; the logs without a step unchanged.
 
 Outputs: the smoothed height at the clock's ticks, its standard deviation (``fused_std``: the
