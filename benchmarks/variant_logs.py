@@ -9,7 +9,7 @@ windy-3]
 
 The variants (``tests/variants.py``, which the tests use too): ``no-<kind>``, ``no-imu``,
 ``rate-<hz>``, ``gps-<hz>``, ``spikes-<kind>``, ``noisy-<kind>``, ``step-<kind>``,
-``regain-<kind>``, ``airflow-<k>``, ``windy-<w>``, ``rezero-<s>`` (``gps-<hz>``,
+``regain-<kind>``, ``airflow-<k>``, ``windy-<w>``, ``rezero-<s>``, joined by ``+`` (``gps-<hz>``,
 ``step-<kind>``, ``regain-<kind>``, ``rezero-<s>`` and ``windy-<w>`` but ``windy-3`` not in the
 default set).
 

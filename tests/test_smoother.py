@@ -477,6 +477,46 @@ def test_a_gps_s_step_against_two_barometers_is_one_jump_of_the_gps() -> None:
     assert np.max(np.abs(res.fused[after] - h[after])) < 0.05
 
 
+def _regained(seed: int, jump_m: float) -> tuple[FusionInput, np.ndarray, np.ndarray]:
+    """A climb to 30 m and a hold, a GPS 5 cm noisy and a barometer 0.6 m noisy (the 3.3
+    plane's), lost from 60 to 70 s and ``jump_m`` higher once regained. The inputs, the truth,
+    the clock."""
+    rng = np.random.default_rng(seed)
+    dt = 0.1
+    t = np.arange(0.0, 120.0, dt)
+    h = np.interp(t, [0, 20, 40, 120], [0, 0, 30, 30])
+    a = np.gradient(np.gradient(h, dt), dt) + rng.normal(0, 0.05, t.size)
+    z = np.column_stack([h + rng.normal(0, 0.05, t.size), h + rng.normal(0, 0.6, t.size)])
+    z[(t >= 60.0) & (t < 70.0), 1] = np.nan
+    z[t >= 70.0, 1] += jump_m
+    inputs = FusionInput.from_heights(z, 0.1, kinds=("gps", "baro"), accel_up=a)
+    return replace(inputs, on_ground_s=((0.0, 18.0),)), h, t
+
+
+def test_a_sensor_regained_elsewhere_is_its_jump_where_the_likelihood_says_so() -> None:
+    """The barometer regained 2 m higher: 5.6 sigma across its gap, under the sure steps' 10;
+    taken as a tentative step, the likelihood makes it the barometer's jump and the height
+    stays on the truth (without it the smoother followed the barometer 2.0 m up). A tentative
+    step where nothing jumped is not taken: the height as without it."""
+    inputs, h, t = _regained(6, 2.0)
+    (step,) = find_steps(t, inputs.z, inputs.names, inputs.kinds)
+    assert step.tentative
+    jump = (step.time_s, (0, 1), step.size_m, step.half_width_s)
+    res = fuse_smoother(replace(inputs, tentative=(jump,)), SmootherParams())
+    when, size, sensor = re.fullmatch(r"(\S+) s: (\S+) m, (\w+)", str(res.params["steps"])).groups()
+    assert (float(when), sensor) == (64.95, "baro")
+    assert float(size) == pytest.approx(2.0, abs=0.3)
+    after = t >= 70.0
+    assert np.sqrt(np.mean((res.fused[after] - h[after]) ** 2)) < 0.05
+    plain = fuse_smoother(inputs, SmootherParams())
+    assert np.sqrt(np.mean((plain.fused[after] - h[after]) ** 2)) > 1.5
+    inputs, h, t = _regained(0, 0.0)
+    made_up = replace(inputs, tentative=((64.95, (0, 1), 2.0, 5.0),))
+    res = fuse_smoother(made_up, SmootherParams())
+    assert res.params["steps"] == ""
+    np.testing.assert_array_equal(res.fused, fuse_smoother(inputs, SmootherParams()).fused)
+
+
 @pytest.mark.parametrize("stepped", ["gps", "gps2", "baro"])
 def test_a_real_log_s_sensor_stepped_2_m_is_its_jump_beside_the_others(stepped: str) -> None:
     """A real log with two GPS receivers and a barometer, one of them 2 m higher from 80 s on.

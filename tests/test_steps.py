@@ -8,8 +8,10 @@ import pytest
 
 from altfuse.model import SensorKind
 from altfuse.steps import (
+    REGAIN_SIGMAS,
     STEP_GAP_S,
     STEP_MIN_M,
+    STEP_SIGMAS,
     _end_error,
     _line_ends,
     _step_at,
@@ -110,6 +112,24 @@ def test_a_step_across_a_gap_is_found_in_its_middle_and_a_long_gap_is_not_bridge
     paused = lost.copy()
     paused[(t >= 40.0) & (t < 50.0), 1] = np.nan
     assert find_steps(t, paused, ("gps", "baro"), KINDS) == ()
+
+
+def test_a_step_across_a_gap_is_a_candidate_from_regain_sigmas() -> None:
+    """A real receiver's GPS (0.3 m noisy, wandering) lost for 10 s and regained 2 m higher:
+    6.8 sigma across its gap, a tentative step (the smoother takes it where the likelihood
+    says it jumped); the same 2 m without the gap is not 10 sigma, and no step."""
+    t, _, z = two_sensors(4, gps_noise=0.3, walk_m2_s=0.01)
+    lost = z.copy()
+    lost[(t >= 40.0) & (t < 50.0), 0] = np.nan
+    lost[t >= 50.0, 0] += 2.0
+    (step,) = find_steps(t, lost, ("gps", "baro"), KINDS)
+    assert step.tentative
+    assert REGAIN_SIGMAS < step.sigmas <= STEP_SIGMAS
+    assert step.time_s == pytest.approx(44.95, abs=0.11)
+    assert step.size_m == pytest.approx(-2.0, abs=0.6)
+    jumped = z.copy()
+    jumped[t >= 45.0, 0] += 2.0
+    assert find_steps(t, jumped, ("gps", "baro"), KINDS) == ()
 
 
 @pytest.mark.parametrize("gap", [0, 1, 13])

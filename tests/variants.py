@@ -25,6 +25,8 @@ and alignment:
 - ``rezero-<s>``: the barometers 2 m high until ``s`` seconds before the take-off (the
   datum's), where the autopilot re-zeroed them (Copter arming without a home), read as altfuse
   reads such a log (``EV`` ``EKF_ALT_RESET`` there: :func:`altfuse.io.dataflash.rejoined`).
+
+Variants join with ``+``: ``noisy-gps+regain-gps``, a real receiver's GPS regained elsewhere.
 """
 
 from __future__ import annotations
@@ -121,7 +123,11 @@ CHANGES: dict[str, tuple[tuple[str, ...] | None, Callable[..., Series]]] = {
 
 
 def variant(flight: FlightLog, how: str, seed: int = 1) -> FlightLog:
-    """``flight`` changed as the variant ``how`` says (see the module doc)."""
+    """``flight`` changed as the variant ``how`` says (see the module doc); variants joined by
+    ``+`` one after the other, the next with the next seed (``noisy-gps+regain-gps``)."""
+    if "+" in how:
+        first, _, rest = how.partition("+")
+        return variant(variant(flight, first, seed), rest, seed + 1)
     rng = np.random.default_rng(seed)
     what, _, arg = how.partition("-")
     if what == "no" and arg == "imu":

@@ -29,6 +29,7 @@ from altfuse.datum import (
 )
 from altfuse.errors import NoUsableSensorsError, ParameterError, Refusal, UnsupportedLogError
 from altfuse.fuse import DEFAULT_METHOD, METHODS, FusionInput, FusionResult, Method, method
+from altfuse.fuse.base import Jump
 from altfuse.guard import guard
 from altfuse.inertial import referred_vertical_acceleration, velocity_integral
 from altfuse.io import read_log
@@ -303,16 +304,23 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         scale_unknown=tuple(o.scale_unknown for o in referred.offsets),
         scale_known=tuple(o.scale_known for o in referred.offsets),
         landed=_samples(flight.landed),
-        steps=tuple(
-            (
-                s.time_s,
-                (referred.names.index(s.first), referred.names.index(s.second)),
-                s.size_m,
-                s.half_width_s,
-            )
-            for s in referred.steps
-            if s.first in referred.names and s.second in referred.names
-        ),
+        steps=_jumps(referred, tentative=False),
+        tentative=_jumps(referred, tentative=True),
+    )
+
+
+def _jumps(referred: Referred, *, tentative: bool) -> tuple[Jump, ...]:
+    """The ``referred`` steps (:attr:`altfuse.steps.Step.tentative` or not) as a fusion method
+    takes them: between the sensors of ``referred.names`` by their indices."""
+    return tuple(
+        (
+            s.time_s,
+            (referred.names.index(s.first), referred.names.index(s.second)),
+            s.size_m,
+            s.half_width_s,
+        )
+        for s in referred.steps
+        if s.tentative == tentative and s.first in referred.names and s.second in referred.names
     )
 
 

@@ -94,6 +94,10 @@ class FusionInput:
         (:mod:`altfuse.steps`): each with the sensors that may have jumped, by their indices
         in ``z``'s order, and the jump [m]: of the second's heights against the first's, or,
         where a method found which one jumped, that one alone and its own jump.
+    tentative
+        As ``steps``, those found only across a gap of one sensor's, below
+        :data:`altfuse.steps.STEP_SIGMAS` (:attr:`altfuse.steps.Step.tentative`): a jump where
+        a method's evidence tells one from none.
     """
 
     t: FloatArray
@@ -116,6 +120,7 @@ class FusionInput:
     scale_known: tuple[tuple[float, float] | None, ...] = ()
     landed: Samples | None = None
     steps: tuple[Jump, ...] = ()
+    tentative: tuple[Jump, ...] = ()
 
     def __post_init__(self) -> None:
         n = self.z.shape[1] if self.z.ndim == 2 else -1

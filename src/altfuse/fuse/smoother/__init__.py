@@ -206,9 +206,12 @@ the steps at one instant, as one event) is tried as either sensor's jump
 (:func:`.evidence.jump_evidence`: the accelerometer holds the height through it, and any third
 sensor); the one whose samples are the likelier is taken, its samples after the step moved back
 by it and its offset let jump (``JUMP_SIGMAS`` times the step over ``JUMP_HALF_WIDTH_S``);
-where neither is, both offsets may jump. Recorded as ``steps`` (time, the jump, whose). On the
+where neither is, both offsets may jump. A tentative step (a sensor regained elsewhere, found
+below the sure steps' significance: :attr:`altfuse.steps.Step.tentative`) is tried as no jump
+as well, and made one only where the likelihood says so (:func:`.evidence.regain_evidence`).
+Recorded as ``steps`` (time, the jump, whose). On the
 truth logs with one sensor stepped 1 m half-way, within the bar on 10 and 13 of 13 (barometer,
-GPS) where it was 7 and 12; lost for 10 s and regained 2 m higher, 12 and 13 where it was 6
+GPS) where it was 7 and 12; lost for 10 s and regained 2 m higher, 13 and 13 where it was 6
 and 11; the logs without a step unchanged.
 
 Outputs: the smoothed height at the clock's ticks, its standard deviation (``fused_std``: the
@@ -287,6 +290,7 @@ from altfuse.fuse.smoother.evidence import (
     evidence_record,
     gps_evidence,
     jump_evidence,
+    regain_evidence,
     relearnt_scales,
     smoothed_wind,
     thermal_evidence,
@@ -682,9 +686,11 @@ def _jumps(
     the clock, not on its samples), but a GPS's offset is bounded (``gps_correlation_s``) and
     returns to its mean: left to its offset, a simulator's GPS stepped 1 m drew the height 0.12
     m off both sensors over the next two minutes."""
-    if not inputs.steps:
+    if not inputs.steps and not inputs.tentative:
         return (), ev
-    steps = jump_evidence(ev, (r, layout), inputs.steps, partial(_windowed, inputs))
+    windowed = partial(_windowed, inputs)
+    steps = jump_evidence(ev, (r, layout), inputs.steps, windowed) if inputs.steps else ()
+    steps += regain_evidence(ev, (r, layout), steps, inputs.tentative, windowed)
     z = ev.z.copy()
     for time, sensors, size, _ in steps:
         if len(sensors) == 1:

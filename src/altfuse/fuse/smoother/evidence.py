@@ -390,6 +390,45 @@ def jump_evidence(
     return tuple(jump for jumps in chosen for jump in jumps)
 
 
+def regain_evidence(
+    ev: Events,
+    model: tuple[FloatArray, Layout],
+    taken: Sequence[Jump],
+    tentative: Sequence[Jump],
+    windowed: Callable[[Jump], Jump],
+) -> tuple[Jump, ...]:
+    """The ``tentative`` steps (found only across a sensor's gap, below the sure steps'
+    significance: :attr:`altfuse.steps.Step.tentative`) that the log's evidence takes, each
+    event (as :func:`jump_evidence` groups them) tried as no jump and as each of its two
+    readings (:func:`_options`), with the jumps ``taken`` and those taken before it: a reading
+    is taken where its samples' log-likelihood is JUMP_GAIN above no jump's (the other's
+    where that one's is JUMP_GAIN above it; undecided, as :func:`jump_evidence` leaves an
+    event). A GPS lost for 10 s and regained 2 m higher beside a barometer is 5-10 sigma where
+    the GPS is a real one (0.3 m noisy, wandering): not found, the simulators' quadplane's
+    height followed it 0.96 m off."""
+    r, layout = model
+    out: list[Jump] = []
+    for event in _together(tentative):
+        steps = [tentative[k] for k in event]
+        readings = [[windowed(jump) for jump in option] for option in _options(steps)]
+        if not readings:
+            continue
+        trials = [
+            (replace(ev, q_state=with_jumps(ev.q_state, [*taken, *out, *option], ev.t)), r, layout)
+            for option in ([], *readings)
+        ]
+        none, a, b = likelihoods(*trials)
+        if max(evidence_gain(none, a), evidence_gain(none, b)) <= JUMP_GAIN:
+            continue
+        if evidence_gain(a, b) > JUMP_GAIN:
+            out.extend(readings[1])
+        elif evidence_gain(b, a) > JUMP_GAIN or len(steps) > 1:
+            out.extend(readings[0])
+        else:
+            out.extend(windowed(jump) for jump in steps)
+    return tuple(out)
+
+
 def _options(event: Sequence[Jump]) -> list[list[Jump]]:
     """The two readings of an event's steps (each between two sensors): one step as its first
     sensor's jump or its second's; several (sharing one sensor) as one jump of the sensor they
