@@ -673,13 +673,7 @@ def _refer_segment(
     wind = None
     if referral == "full":
         scales = baro_scales(aligned, h, offsets, steps, told.track)
-        # in a climb a barometer's scale hides a step from the lines either side of it, and the
-        # step moves the scale's fit on the heights; not the fit on their changes, which has
-        # one change across it: sought again on the heights that fit's scales refer
-        again = _steps(aligned, _refer(aligned, ground, _on_changes(scales))[1], offsets)
-        if again != steps:
-            steps = _either_search(steps, again)
-            scales = baro_scales(aligned, h, offsets, steps, told.track)
+        steps, scales = _sought_again(aligned, ground, (h, offsets), steps, scales, told.track)
         wind = max(
             (sc.wind for sc in scales.values() if sc.wind is not None),
             key=lambda w: w.sigmas,
@@ -721,6 +715,32 @@ def _steps(aligned: Aligned, h: FloatArray, offsets: dict[int, Offset]) -> tuple
     referred = sorted(offsets)
     names, kinds = [aligned.names[i] for i in referred], [aligned.kinds[i] for i in referred]
     return find_steps(aligned.t, h[:, referred], names, kinds)
+
+
+def _sought_again(
+    aligned: Aligned,
+    ground: _Ground,
+    referred: tuple[FloatArray, dict[int, Offset]],
+    steps: tuple[Step, ...],
+    scales: dict[int, Scale],
+    track: Track | None,
+) -> tuple[tuple[Step, ...], dict[int, Scale]]:
+    """The ``steps`` found on the heights referred by offsets (``referred``: those heights and
+    offsets) and those found again on the heights the barometers' fit on the changes scales
+    (:func:`_on_changes`), and the ``scales`` fitted again with them where they differ.
+
+    In a climb a barometer's scale hides a step from the lines either side of it, and the step
+    moves the scale's fit on the heights; not the fit on their changes, which has one change
+    across it."""
+    h, offsets = referred
+    rescaled = _on_changes(scales)
+    if not rescaled:
+        return steps, scales
+    again = _steps(aligned, _refer(aligned, ground, rescaled)[1], offsets)
+    if again == steps:
+        return steps, scales
+    steps = _either_search(steps, again)
+    return steps, baro_scales(aligned, h, offsets, steps, track)
 
 
 def _either_search(first: Sequence[Step], again: Sequence[Step]) -> tuple[Step, ...]:
