@@ -230,6 +230,31 @@ def test_a_step_a_barometer_s_scale_hides_in_a_climb_is_found() -> None:
     _a_step_and_a_scale_found(t, np.cumsum(v) * 0.1, 45.0, 2)
 
 
+def test_a_barometer_s_step_found_against_the_gps_is_free_against_the_rangefinder() -> None:
+    """A 10 m hover over a rangefinder 2 cm noisy, beside a real receiver's GPS (0.3 m noisy,
+    wandering), the barometer 5 % high, lost for 10 s and regained 2 m higher: the step is
+    found against the GPS, whose fit cannot tell the scale (1.086 +- 0.077); the fit against
+    the rangefinder, without the step (not one between those two), could not either (0.950 +-
+    0.083). Which of a step's sensors jumped the datum does not know: a step of either is free
+    in each fit, and the rangefinder tells 5 % to 1 %."""
+    rng = np.random.default_rng(1)
+    t = np.arange(0.0, 120.0, 0.1)
+    h = np.interp(t, [0, 20, 30, 120], [0, 0, 10, 10])
+    walk = np.cumsum(rng.normal(0, np.sqrt(0.01 * 0.1), t.size))
+    gps = 300 + h + walk + rng.normal(0, 0.3, t.size)
+    baro = 2.0 + 1.05 * h + np.where(t >= 80.0, 2.0, 0.0) + rng.normal(0, 0.05, t.size)
+    baro[(t >= 70.0) & (t < 80.0)] = np.nan
+    rangefinder = np.where(h < 0.5, np.nan, 0.1 + h + rng.normal(0, 0.02, t.size))
+    names = ("gps", "baro", "rangefinder")
+    z = np.column_stack([gps, baro, rangefinder])
+    ref = refer_to_takeoff(Aligned(t, names, names, z, 10.0, 1.0, "union", {}))
+    assert [(s.first, s.second) for s in ref.steps] == [("gps", "baro")]
+    baro_offset = {o.name: o for o in ref.offsets}["baro"]
+    assert baro_offset.scale_applied
+    assert "against rangefinder" in str(baro_offset.scale_method)
+    assert baro_offset.scale == pytest.approx(1.05, abs=0.01)
+
+
 def test_a_scale_fit_with_too_few_rows_to_reject_from_keeps_them() -> None:
     """Ten changes (a 40 s flight's, its GPS lost for 10 s), three of them 0.5-0.8 m off: the
     3-sigma rejection of so few rows left seven, fewer than SCALE_MIN_CHANGES, and no scale

@@ -928,8 +928,10 @@ def _in_time(t: FloatArray, valid: npt.NDArray[np.bool_]) -> tuple[FloatArray, f
 
 
 def _between(steps: Sequence[Step], a: str, b: str) -> list[float]:
-    """The times [s] of the ``steps`` between sensors ``a`` and ``b``."""
-    return [s.time_s for s in steps if {s.first, s.second} == {a, b}]
+    """The times [s] of the ``steps`` of sensor ``a`` or ``b`` against any other: which of a
+    step's two sensors jumped the datum does not know, and a barometer's jump found against the
+    GPS is one against a rangefinder too."""
+    return [s.time_s for s in steps if {s.first, s.second} & {a, b}]
 
 
 def _scale(
@@ -949,7 +951,11 @@ def _scale(
         return Scale(1.0, None, reference, f"not estimated: too few ticks beside {reference}",
                      False)  # fmt: skip
     minutes, per_independent = _in_time(t, both)
-    jumps = [(t > at).astype(np.float64) for at in steps]
+    # one free level per split of the ticks both have (steps in one gap, or at one instant
+    # against two sensors, are one)
+    shared = t[both]
+    splits = {int(np.searchsorted(shared, at, side="right")) for at in steps} - {0, shared.size}
+    jumps = [(t >= shared[k]).astype(np.float64) for k in sorted(splits)]
     levels = (
         np.column_stack([x, minutes, np.ones(t.size), *jumps])[both],
         y[both],
