@@ -283,6 +283,7 @@ from altfuse.fuse.smoother.events import (
     merge_events,
 )
 from altfuse.fuse.smoother.evidence import (
+    JUMP_TOGETHER_S,
     STABLE_GAIN,
     Made,
     drift_evidence,
@@ -690,12 +691,31 @@ def _jumps(
         return (), ev
     windowed = partial(_windowed, inputs)
     steps = jump_evidence(ev, (r, layout), inputs.steps, windowed) if inputs.steps else ()
-    steps += regain_evidence(ev, (r, layout), steps, inputs.tentative, windowed)
+    steps = _once(steps + regain_evidence(ev, (r, layout), steps, inputs.tentative, windowed))
     z = ev.z.copy()
     for time, sensors, size, _ in steps:
         if len(sensors) == 1:
             z[(ev.who == sensors[0]) & (ev.t > time)] -= size
     return steps, replace(ev, z=z, q_state=with_jumps(ev.q_state, steps, ev.t))
+
+
+def _once(jumps: Sequence[Jump]) -> tuple[Jump, ...]:
+    """``jumps`` with one sensor's own jumps within JUMP_TOGETHER_S of each other made one, at
+    the first's instant, of their mean size. A GPS's jump is a step against each barometer;
+    against one that lost its samples around it, the step lies in that gap's middle, seconds
+    away, and is another event: both went to the GPS, placed at the instant of its own jump
+    (:func:`_windowed`), and its samples were moved back twice (a 2 m jump made 4 m)."""
+    groups: list[list[Jump]] = []
+    for jump in sorted(jumps, key=lambda j: j[0]):
+        one = len(jump[1]) == 1
+        same = [
+            g for g in groups if one and g[0][1] == jump[1] and jump[0] - g[0][0] <= JUMP_TOGETHER_S
+        ]
+        if same:
+            same[-1].append(jump)
+        else:
+            groups.append([jump])
+    return tuple((g[0][0], g[0][1], float(np.mean([j[2] for j in g])), g[0][3]) for g in groups)
 
 
 def _windowed(inputs: FusionInput, jump: Jump) -> Jump:
