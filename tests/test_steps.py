@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from altfuse.model import SensorKind
+from altfuse.pipeline import step_record
 from altfuse.steps import (
     REGAIN_SIGMAS,
     STEP_GAP_S,
@@ -124,6 +125,7 @@ def test_a_step_across_a_gap_is_a_candidate_from_regain_sigmas() -> None:
     lost[t >= 50.0, 0] += 2.0
     (step,) = find_steps(t, lost, ("gps", "baro"), KINDS)
     assert step.tentative
+    assert step_record(step)["tentative"] is True
     assert REGAIN_SIGMAS < step.sigmas <= STEP_SIGMAS
     assert step.time_s == pytest.approx(44.95, abs=0.11)
     assert step.size_m == pytest.approx(-2.0, abs=0.6)

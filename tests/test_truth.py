@@ -407,6 +407,7 @@ def test_two_barometers_stepped_in_the_gps_s_gap_are_the_ones_that_jumped() -> N
     assert all(s.half_width_s == pytest.approx(6.65, abs=0.1) for s in steps)
     recorded = [step_record(s) for s in steps]
     assert [r["half_width_s"] for r in recorded] == [round(s.half_width_s, 3) for s in steps]
+    assert [r["tentative"] for r in recorded] == [False, False]  # beyond 10 sigma
     jumps = str(evaluation.runs["smoother"].result.params["steps"]).split("; ")
     assert [re.sub(r"\S+ m", "x m", j) for j in jumps] == [
         "66.25 s: x m, baro",

@@ -1099,9 +1099,8 @@ def _robust_fit(
     without the residuals beyond 3 sigma (and ``SCALE_MIN_OUTLIER_M``), and their standard
     errors, the residuals' variance counted ``per_independent`` times (correlated residuals:
     rows per independent one); a rejection that would leave fewer than SCALE_MIN_CHANGES rows
-    is not made (the fit before it stands); None with fewer rows than that or where the design
-    cannot tell the
-    coefficients."""
+    is not made (the fit before it stands); None with fewer rows than that, or where the
+    design cannot tell the coefficients."""
     if y.size < SCALE_MIN_CHANGES:
         return None
     keep = np.ones(y.size, dtype=bool)

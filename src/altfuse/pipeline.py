@@ -429,6 +429,8 @@ def step_record(step: Step) -> dict[str, Any]:
         "sigmas": round(step.sigmas, 1),
         # found across a gap of one sensor's: anywhere within this of time_s [s] (else 0)
         "half_width_s": round(step.half_width_s, 3),
+        # found only so, under 10 sigma: a jump only where a method's evidence says so
+        "tentative": step.tentative,
     }
 
 

@@ -404,8 +404,8 @@ def regain_evidence(
     is taken where its samples' log-likelihood is JUMP_GAIN above no jump's (the other's
     where that one's is JUMP_GAIN above it; undecided, as :func:`jump_evidence` leaves an
     event). A GPS lost for 10 s and regained 2 m higher beside a barometer is 5-10 sigma where
-    the GPS is a real one (0.3 m noisy, wandering): not found, the simulators' quadplane's
-    height followed it 0.96 m off."""
+    the GPS is a real one (0.3 m noisy, wandering): not found, the 4.5 plane's simulated
+    height followed it, 0.159 m RMSE (0.023 with its jump)."""
     r, layout = model
     out: list[Jump] = []
     for event in _together(tentative):
