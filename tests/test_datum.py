@@ -11,6 +11,7 @@ from altfuse.align import Aligned
 from altfuse.datum import (
     Track,
     Wind,
+    _either_search,
     _robust_fit,
     detector_takeoffs,
     dynamic_head,
@@ -23,6 +24,7 @@ from altfuse.fuse.support import SupportParams, fuse_support
 from altfuse.model import Samples, Series
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
+from altfuse.steps import Step
 
 
 def flight(gps_offset: float = 146.0) -> tuple[Aligned, np.ndarray]:
@@ -253,6 +255,21 @@ def test_a_barometer_s_step_found_against_the_gps_is_free_against_the_rangefinde
     assert baro_offset.scale_applied
     assert "against rangefinder" in str(baro_offset.scale_method)
     assert baro_offset.scale == pytest.approx(1.05, abs=0.01)
+
+
+def test_the_second_step_search_keeps_the_first_s_steps_it_did_not_find() -> None:
+    """The steps sought again on the scaled heights replace the first search's between the
+    same sensors at the same place (within 2 s, or the gap a step lies in); the first's others
+    stay: across a climb's gap the unscaled barometer misreads a step's size (the 3.3 plane's
+    GPS regained 2 m higher: -6.0 m) but not that it is there."""
+    across_gap = Step(162.45, "gps", "baro", -5.96, 10.5, 5.15)
+    elsewhere = Step(40.0, "gps", "baro", 1.0, 12.0)
+    first = (elsewhere, across_gap)
+    assert _either_search(first, ()) == first
+    measured_again = Step(165.0, "gps", "baro", -2.1, 6.2, 5.0)
+    assert _either_search(first, (measured_again,)) == (elsewhere, measured_again)
+    other_pair = Step(162.45, "gps", "baro2", -2.0, 11.0, 5.15)
+    assert _either_search(first, (other_pair,)) == (elsewhere, other_pair, across_gap)
 
 
 def test_a_scale_fit_with_too_few_rows_to_reject_from_keeps_them() -> None:
