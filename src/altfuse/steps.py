@@ -133,12 +133,12 @@ def _steps(t: FloatArray, d: FloatArray, either: npt.NDArray[np.bool_]) -> list[
     dt = float(t[1] - t[0])
     d = d.copy()
     valid = np.flatnonzero(np.isfinite(d))
+    gaps = _gaps(d, dt, either)  # taking a step out of d leaves where it is NaN
+    least = np.full(d.size, STEP_SIGMAS)
+    least[[k for k, _ in gaps]] = REGAIN_SIGMAS
     found: list[_Found] = []
     for _ in range(STEP_MOST):
-        best, size = _significance(d, dt, either)
-        regained = np.zeros(d.size, dtype=bool)
-        regained[[k for k, _ in _gaps(d, dt, either)]] = True
-        least = np.where(regained, REGAIN_SIGMAS, STEP_SIGMAS)
+        best, size = _significance(d, dt, gaps)
         candidate = (best > least) & (np.abs(size) >= STEP_MIN_M)
         if not candidate.any():
             break
@@ -191,16 +191,16 @@ def _merged(found: list[_Found]) -> list[_Found]:
 
 
 def _significance(
-    d: FloatArray, dt: float, either: npt.NDArray[np.bool_]
+    d: FloatArray, dt: float, gaps: list[tuple[int, int]]
 ) -> tuple[FloatArray, FloatArray]:
     """At each boundary, the most significant step over STEP_WINDOWS_S: its significance
-    [sigma] and its size [m]. Across a gap of at most STEP_GAP_S in which ``either`` sensor
-    kept measuring (the other lost and regained: a GPS's fix comes back elsewhere) the lines
-    are drawn to its middle; not across a pause of the log, which ends one flight's excursion
-    as often as it starts a level (a crash's last seconds, and the same flight logged again)."""
+    [sigma] and its size [m]. Across each of the ``gaps`` (:func:`_gaps`: at most STEP_GAP_S,
+    one sensor kept measuring, the other lost and regained: a GPS's fix comes back elsewhere)
+    the lines are drawn to its middle; not across a pause of the log, which ends one flight's
+    excursion as often as it starts a level (a crash's last seconds, and the same flight
+    logged again)."""
     sigma = white_noise_sigma(d[np.isfinite(d)])
     best, size = np.zeros(d.size), np.zeros(d.size)
-    gaps = _gaps(d, dt, either)
     for window_s in STEP_WINDOWS_S:
         n = _ticks(window_s, dt)
         if 2 * n > d.size:

@@ -365,7 +365,6 @@ def jump_evidence(
     it (half the gap it was found across last) with the window it lies in instead
     (:func:`.noise.with_jumps`).
     """
-    r, layout = model
     events = _together(steps)
     chosen = [[windowed(steps[k]) for k in event] for event in events]
     order = sorted(range(len(events)), key=lambda e: -max(abs(steps[k][2]) for k in events[e]))
@@ -374,20 +373,38 @@ def jump_evidence(
         options = [[windowed(jump) for jump in option] for option in raw]
         if not options:
             continue
-        trials = []
-        for option in options:
-            trial = [*chosen[:e], option, *chosen[e + 1 :]]
-            flat = [jump for jumps in trial for jump in jumps]
-            trials.append((replace(ev, q_state=with_jumps(ev.q_state, flat, ev.t)), r, layout))
-        a, b = likelihoods(*trials)
-        if evidence_gain(a, b) > JUMP_GAIN:
-            chosen[e] = options[1]
-        elif evidence_gain(b, a) > JUMP_GAIN or len(chosen[e]) > 1:
-            # undecided between several steps: the one sensor they share, which the others
-            # agree moved (a GPS's 2 m step beside a second GPS and a barometer, loose on all
-            # three: the fused height 0.30 m off; on the GPS, 0.002)
-            chosen[e] = options[0]
+        before = [jump for jumps in chosen[:e] for jump in jumps]
+        after = [jump for jumps in chosen[e + 1 :] for jump in jumps]
+        trials = (_jumping(ev, model, [*before, *option, *after]) for option in options)
+        chosen[e] = _reading(likelihoods(*trials), options, chosen[e])
     return tuple(jump for jumps in chosen for jump in jumps)
+
+
+def _jumping(
+    ev: Events, model: tuple[FloatArray, Layout], jumps: Sequence[Jump]
+) -> tuple[Events, FloatArray, Layout]:
+    """The model of ``ev`` with its offsets let jump at ``jumps`` (:func:`.noise.with_jumps`),
+    as :func:`.passes.likelihoods` takes it (``model``: the variances and the layout)."""
+    r, layout = model
+    return replace(ev, q_state=with_jumps(ev.q_state, jumps, ev.t)), r, layout
+
+
+def _reading(
+    verdicts: Sequence[dict[str, np.ndarray]],
+    readings: Sequence[list[Jump]],
+    raw: list[Jump],
+) -> list[Jump]:
+    """The one of an event's two ``readings`` whose samples' log-likelihood (``verdicts``, in
+    their order) is JUMP_GAIN above the other's; undecided, its ``raw`` steps (each loose on
+    both its sensors), or between several steps the one sensor they share, which the others
+    agree moved (a GPS's 2 m step beside a second GPS and a barometer, loose on all three: the
+    fused height 0.30 m off; on the GPS, 0.002)."""
+    a, b = verdicts
+    if evidence_gain(a, b) > JUMP_GAIN:
+        return readings[1]
+    if evidence_gain(b, a) > JUMP_GAIN or len(raw) > 1:
+        return readings[0]
+    return raw
 
 
 def regain_evidence(
@@ -406,26 +423,16 @@ def regain_evidence(
     event). A GPS lost for 10 s and regained 2 m higher beside a barometer is 5-10 sigma where
     the GPS is a real one (0.3 m noisy, wandering): not found, the 4.5 plane's simulated
     height followed it, 0.159 m RMSE (0.023 with its jump)."""
-    r, layout = model
     out: list[Jump] = []
     for event in _together(tentative):
         steps = [tentative[k] for k in event]
         readings = [[windowed(jump) for jump in option] for option in _options(steps)]
         if not readings:
             continue
-        trials = [
-            (replace(ev, q_state=with_jumps(ev.q_state, [*taken, *out, *option], ev.t)), r, layout)
-            for option in ([], *readings)
-        ]
+        trials = (_jumping(ev, model, [*taken, *out, *option]) for option in ([], *readings))
         none, a, b = likelihoods(*trials)
-        if max(evidence_gain(none, a), evidence_gain(none, b)) <= JUMP_GAIN:
-            continue
-        if evidence_gain(a, b) > JUMP_GAIN:
-            out.extend(readings[1])
-        elif evidence_gain(b, a) > JUMP_GAIN or len(steps) > 1:
-            out.extend(readings[0])
-        else:
-            out.extend(windowed(jump) for jump in steps)
+        if max(evidence_gain(none, a), evidence_gain(none, b)) > JUMP_GAIN:
+            out.extend(_reading((a, b), readings, [windowed(jump) for jump in steps]))
     return tuple(out)
 
 
