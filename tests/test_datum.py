@@ -94,6 +94,29 @@ def test_sensor_without_any_overlap_is_dropped_with_a_reason() -> None:
     assert "rangefinder" in ref.dropped
 
 
+def test_a_barometer_begun_after_the_reference_ended_is_referred_beside_the_gps() -> None:
+    """A PX4 barometer failed over to another device at 140 s, 4 m apart: the second begins
+    where the first (the reference) ends, and is matched to the GPS over its first seconds,
+    though it comes first among the sources, before the GPS is referred (it was dropped: "too
+    few beside baro")."""
+    aligned, h = flight()
+    z = aligned.z.copy()
+    after = aligned.t > 140.0
+    second = np.where(after, z[:, 1] + 4.0, np.nan)
+    z[after, 1] = np.nan
+    failed_over = Aligned(
+        aligned.t, ("baro2", *aligned.names), ("baro", *aligned.kinds),
+        np.column_stack([second, z]), 10.0, 1.0, "union", {},
+    )  # fmt: skip
+    ref = refer_to_takeoff(failed_over)
+    assert ref.reference == "baro"
+    assert not ref.dropped
+    baro2 = next(o for o in ref.offsets if o.name == "baro2")
+    assert baro2.method.startswith("median difference from gps")
+    assert baro2.offset_m == pytest.approx(1.3 + 4.0, abs=0.15)
+    np.testing.assert_allclose(ref.h[after, 0], h[after], atol=0.4)
+
+
 @pytest.mark.parametrize(
     ("ground_s", "climb_m", "name"),
     [

@@ -763,54 +763,95 @@ def _either_search(first: Sequence[Step], again: Sequence[Step]) -> tuple[Step, 
 def _refer(
     aligned: Aligned, ground: _Ground, scales: dict[int, Scale]
 ) -> tuple[dict[int, Offset], FloatArray, dict[str, str]]:
-    """Every source's offset (on the ground, else matched to the referred reference) and its
-    referred heights ``(z - c) / scale``, with the scales given; the sources dropped, and why."""
-    t, z, ref = aligned.t, aligned.z, ground.ref
+    """Every source's offset (on the ground, else matched to the referred reference, else to
+    another source referred) and its referred heights ``(z - c) / scale``, with the scales
+    given; the sources dropped, and why. A source matched to none is tried again once the others
+    are referred: a PX4 barometer failed over to another device begins after the first ends,
+    beside the GPS alone."""
+    z, ref = aligned.z, ground.ref
     offsets: dict[int, Offset] = {}
     h = np.full_like(z, np.nan)
-    dropped: dict[str, str] = {}
-    order = [ref] + [i for i in range(len(aligned.names)) if i != ref]
-    for i in order:
-        name, valid = aligned.names[i], np.isfinite(z[:, i])
-        scale = scales[i].scale if i in scales and scales[i].applied else 1.0
-        # at the reference's own instants in the window: where it moves (a log begun in a
-        # climb), a tick more or less of one sensor is a different height
-        at_ref = ground.window & np.isfinite(z[:, ref])
-        on_ground = at_ref & valid
-        why = "no valid reading on the ground"
-        if aligned.kinds[i] == "rangefinder" and on_ground.any() and i != ref:
-            share = on_ground.sum() / max(int(at_ref.sum()), 1)
-            if share < RANGEFINDER_GROUND_SHARE:  # the tail of readings below its minimum
-                on_ground = np.zeros_like(on_ground)
-                why = f"valid on {share:.0%} of the ground window: below its minimum there"
-                if ground.takeoff_s is not None:  # matched in flight, not on that tail
-                    valid = valid & (t > ground.takeoff_s)
-        if on_ground.sum() >= MIN_WINDOW_TICKS or (i == ref and on_ground.any()):
-            sel, base, how = on_ground, np.zeros_like(t), f"median over the {ground.how}"
-            measured = True
-        elif name in ground.clearances and ground.real:
-            clearance = ground.clearances[name]
-            how = f"its ground clearance, {clearance:.2f} m ({why})"
-            offsets[i] = Offset(name, clearance, how, None, 0)
-            h[:, i] = z[:, i] - clearance
-            continue
-        else:
-            sel = _first_seconds(valid & np.isfinite(h[:, ref]), t, ground.seconds)
-            if sel.sum() < MIN_WINDOW_TICKS:
-                dropped[name] = (
-                    f"no sample on the ground and too few beside {aligned.names[ref]} "
-                    "to find its datum"
-                )
+    pending = [ref] + [i for i in range(len(aligned.names)) if i != ref]
+    while pending:
+        left = []
+        for i in pending:
+            found = _offset(
+                i, aligned, ground, scales.get(i), (h, [ref, *(j for j in offsets if j != ref)])
+            )
+            if found is None:
+                left.append(i)
                 continue
-            base = h[:, ref]
-            how = f"median difference from {aligned.names[ref]} ({why})"
-            measured = False
-        offset = float(np.median(z[sel, i] - scale * base[sel]))
-        sel_t = t[sel]
-        window = (float(sel_t[0]), float(sel_t[-1]))
-        offsets[i] = Offset(name, offset, how, window, int(sel.sum()), scale, on_ground=measured)
-        h[:, i] = (z[:, i] - offset) / scale
+            offsets[i] = found
+            h[:, i] = (z[:, i] - found.offset_m) / found.scale
+        if len(left) == len(pending):
+            break
+        pending = left
+    referred = ", ".join(aligned.names[j] for j in offsets)
+    dropped = {
+        aligned.names[i]: f"no sample on the ground and too few beside {referred} to find its datum"
+        for i in pending
+    }
     return offsets, h, dropped
+
+
+def _offset(
+    i: int,
+    aligned: Aligned,
+    ground: _Ground,
+    scale_of: Scale | None,
+    referred: tuple[FloatArray, list[int]],
+) -> Offset | None:
+    """Source ``i``'s offset: on the ground, else its ground clearance (a rangefinder), else
+    its median difference over its first seconds from the first of the ``referred`` heights
+    (``h`` and their columns, the reference first) beside which it has MIN_WINDOW_TICKS; None
+    where it has none."""
+    t, z, ref = aligned.t, aligned.z, ground.ref
+    name, valid = aligned.names[i], np.isfinite(z[:, i])
+    scale = scale_of.scale if scale_of is not None and scale_of.applied else 1.0
+    # at the reference's own instants in the window: where it moves (a log begun in a
+    # climb), a tick more or less of one sensor is a different height
+    at_ref = ground.window & np.isfinite(z[:, ref])
+    on_ground = at_ref & valid
+    why = "no valid reading on the ground"
+    if aligned.kinds[i] == "rangefinder" and on_ground.any() and i != ref:
+        share = on_ground.sum() / max(int(at_ref.sum()), 1)
+        if share < RANGEFINDER_GROUND_SHARE:  # the tail of readings below its minimum
+            on_ground = np.zeros_like(on_ground)
+            why = f"valid on {share:.0%} of the ground window: below its minimum there"
+            if ground.takeoff_s is not None:  # matched in flight, not on that tail
+                valid = valid & (t > ground.takeoff_s)
+    if on_ground.sum() >= MIN_WINDOW_TICKS or (i == ref and on_ground.any()):
+        sel, base, how = on_ground, np.zeros_like(t), f"median over the {ground.how}"
+        measured = True
+    elif name in ground.clearances and ground.real:
+        clearance = ground.clearances[name]
+        return Offset(name, clearance, f"its ground clearance, {clearance:.2f} m ({why})", None, 0)
+    else:
+        h, columns = referred
+        beside = _beside(valid, h, t, ground.seconds, columns)
+        if beside is None:
+            return None
+        j, sel = beside
+        base = h[:, j]
+        how = f"median difference from {aligned.names[j]} ({why})"
+        measured = False
+    offset = float(np.median(z[sel, i] - scale * base[sel]))
+    sel_t = t[sel]
+    window = (float(sel_t[0]), float(sel_t[-1]))
+    return Offset(name, offset, how, window, int(sel.sum()), scale, on_ground=measured)
+
+
+def _beside(
+    valid: npt.NDArray[np.bool_], h: FloatArray, t: FloatArray, seconds: float, referred: list[int]
+) -> tuple[int, npt.NDArray[np.bool_]] | None:
+    """The first of the ``referred`` columns of ``h`` beside which a source ``valid`` at these
+    ticks has MIN_WINDOW_TICKS in its first ``seconds`` with it, and those ticks; None where
+    none has."""
+    for j in referred:
+        sel = _first_seconds(valid & np.isfinite(h[:, j]), t, seconds)
+        if sel.sum() >= MIN_WINDOW_TICKS:
+            return j, sel
+    return None
 
 
 def dynamic_head(speed: Samples | None, t: FloatArray) -> FloatArray | None:
