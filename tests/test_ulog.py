@@ -392,3 +392,28 @@ def test_a_barometer_failover_s_step_is_not_followed(monkeypatch: pytest.MonkeyP
     v = verdict(result, "smoother")
     assert {"rmse", "max"}.isdisjoint(v["fails"])  # type: ignore[arg-type]
     assert v["rmse"] < 0.02  # type: ignore[operator]
+
+
+def test_a_barometer_device_changing_at_every_sample_is_damage(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A ``baro_device_id`` different at every sample is no vehicle's: one barometer, as
+    logged, and a note (each its own would be 623 sensors to fuse)."""
+    import pyulog
+
+    class Scrambled(pyulog.ULog):  # type: ignore[misc]
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            for d in self.data_list:
+                if d.name == "vehicle_air_data":
+                    d.data["baro_device_id"] = np.arange(d.data["timestamp"].size, dtype=np.uint32)
+
+    log = shared_log("px4/pyulog_sample_px4_events.ulg")
+    plain = read_log(log)
+    monkeypatch.setattr(pyulog, "ULog", Scrambled)
+    flight = read_log(log)
+    assert [s.name for s in flight.sensors] == [s.name for s in plain.sensors]
+    assert (
+        "vehicle_air_data: 623 barometers or calibrations, more than 8: damage, read as one "
+        "barometer" in flight.notes
+    )

@@ -354,6 +354,12 @@ def _read_baro(topics: _Topics, sensors: _Sensors) -> None:
                 break
 
 
+#: Most barometer devices and calibrations a log's ``vehicle_air_data`` is read as, each its own
+#: barometer: PX4 carries at most 4 barometers (``MAX_SENSOR_COUNT``), and a calibration or two
+#: more is a lot; more is damage, and each would be one more sensor to fuse.
+MAX_BARO_CHANGES = 8
+
+
 def _devices(
     air: dict[str, np.ndarray], sensors: _Sensors
 ) -> list[tuple[str, dict[str, np.ndarray]]]:
@@ -372,6 +378,12 @@ def _devices(
     if not changes:
         return [("", air)]
     firsts = sorted(np.unique(keys, axis=0, return_index=True)[1].tolist())
+    if len(firsts) > MAX_BARO_CHANGES:
+        sensors.notes.append(
+            f"vehicle_air_data: {len(firsts)} barometers or calibrations, more than "
+            f"{MAX_BARO_CHANGES}: damage, read as one barometer"
+        )
+        return [("", air)]
     named = [
         (", ".join(f"{c} {v}" for c, v in zip(columns, keys[k].tolist(), strict=True)), keys[k])
         for k in firsts
