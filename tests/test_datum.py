@@ -313,6 +313,20 @@ def test_a_scale_fit_with_too_few_rows_to_reject_from_keeps_them() -> None:
     assert np.mean(np.abs(z) < 3.0) >= 0.95
 
 
+def test_a_scale_fit_with_too_few_changes_says_so() -> None:
+    """A GPS in three bursts (8, 2 and 2 s) across a 20 m climb: its ticks are enough to fit
+    levels on, but no span of the changes' fit has both ends. The scale is not estimated for
+    that reason, named (it said "no vertical range" of a 20 m climb)."""
+    aligned, _ = flight()
+    t, z = aligned.t, aligned.z.copy()
+    bursts = ((t >= 110) & (t < 118)) | ((t >= 130) & (t < 132)) | ((t >= 150) & (t < 152))
+    z[~bursts, 0] = np.nan
+    z[:, 2] = np.nan  # no rangefinder to fit against instead
+    ref = refer_to_takeoff(Aligned(t, aligned.names, aligned.kinds, z, 10.0, 1.0, "union", {}))
+    baro = {o.name: o for o in ref.offsets}["baro"]
+    assert baro.scale_method == "not estimated: 0 spans with both heights' change, fewer than 8"
+
+
 def test_a_barometer_s_scale_is_found_beside_its_dynamic_pressure() -> None:
     """A climb to 50 m, a cruise there at 8 m/s and back, the barometer 5 % high and reading
     0.8 V^2 / 2g higher (2.6 m at 8 m/s: its static pressure lowered by the air flowing past):

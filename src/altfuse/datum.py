@@ -1025,7 +1025,7 @@ def _scale(
         told, wind = _with_wind(rows, axes, (levels, changes))
     fit, change = told or (_robust_fit(*levels), _robust_fit(*changes))
     if fit is None or change is None:
-        return Scale(1.0, None, reference, "not estimated: no vertical range", False)
+        return Scale(1.0, None, reference, f"not estimated: {_unfit(changes[1].size)}", False)
     scale = float(fit[0][0])
     std = max(float(fit[1][0]), float(change[1][0]))
     by_changes = (float(change[0][0]), float(change[1][0]))
@@ -1041,6 +1041,14 @@ def _scale(
         how = f"not applied: {label}: implausible"
         return Scale(scale, std, reference, how, False, wind, by_changes)
     return Scale(scale, std, reference, f"{label} over the flight", True, wind, by_changes)
+
+
+def _unfit(changes: int) -> str:
+    """Why a barometer's scale fit told nothing, with ``changes`` rows of height changes: too
+    few of them, else too little vertical range to tell a scale from an offset."""
+    if changes < SCALE_MIN_CHANGES:
+        return f"{changes} spans with both heights' change, fewer than {SCALE_MIN_CHANGES}"
+    return "no vertical range"
 
 
 #: A least-squares problem for :func:`_robust_fit`: design, observations, priors, rows per
