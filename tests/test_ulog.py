@@ -19,13 +19,14 @@ from pyulog import ULog
 from accuracy import verdict
 from altfuse.cli import cli
 from altfuse.errors import NoUsableSensorsError
-from altfuse.evaluation import evaluate
+from altfuse.evaluation import evaluate, evaluate_prepared
 from altfuse.io import read_log
 from altfuse.io.ulog import TOPICS, pressure_altitude
 from altfuse.model import Attitude, Series
 from altfuse.pipeline import FuseOptions, fuse_log, prepare, run_method
 from altfuse.screen import NOT_CONVERGED
 from conftest import SAMPLE_LOG, shared_log
+from variants import variant
 
 #: Every ULog in ../shared/logs/px4 and what ``altfuse fuse`` makes of it: ok (with the warning
 #: line it must print, if any) or refused (with the reason's words).
@@ -181,6 +182,21 @@ def test_a_truth_that_moves_against_the_sensors_is_refused() -> None:
     smoother = next(r for r in good.rows if r.name == "smoother")
     ekf = next(r for r in good.rows if r.kind == "onboard")
     assert smoother.overall.rmse < 0.02 < ekf.overall.rmse
+
+
+def test_a_truth_that_stays_constant_where_the_sensors_move_is_refused_as_such() -> None:
+    """A PX4 simulator log standing on the ground, its groundtruth altitude constant, with
+    its barometer 1 m higher from half-way (``step-baro``): the sensors' median moves, and the
+    truth is refused with what it does (the correlation was "+nan")."""
+    stepped = variant(
+        read_log(shared_log("px4/px4ulogrs_6ba1abc7-b433-4029-b8f5-3b2bb12d3b6c.ulg")), "step-baro"
+    )
+    with pytest.raises(NoUsableSensorsError) as refused:
+        evaluate_prepared(prepare(stepped, FuseOptions()), ["mean"], truth="sim")
+    assert str(refused.value).endswith(
+        "vehicle_global_position_groundtruth.alt refused as truth: its heights stay constant "
+        "where the sensors' median moves (standard deviation 0.25 m)"
+    )
 
 
 def test_a_batch_takes_dataflash_and_ulog_together(tmp_path: Path) -> None:

@@ -186,6 +186,11 @@ def truth_check(truth: FloatArray, referred: Referred) -> str:
         r = float(np.corrcoef(a, b)[0, 1])
     if r >= TRUTH_MIN_CORRELATION:
         return ""
+    if math.isnan(r):  # one of them constant
+        moves = f"(standard deviation {max(float(np.std(a)), float(np.std(b))):.2f} m)"
+        if np.ptp(a) == 0:
+            return f"its heights stay constant where the sensors' median moves {moves}"
+        return f"the sensors' median stays constant where its heights move {moves}"
     why = f"its heights do not follow the sensors' (correlation {r:+.2f})"
     if r <= -TRUTH_MIN_CORRELATION:
         why += ": it moves opposite to them, a sign error (PX4's simulator groundtruth had one "
