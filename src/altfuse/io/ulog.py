@@ -368,8 +368,9 @@ def _devices(
     a note of the changes. PX4 fails over to another barometer when the selected one fails, and
     a new calibration moves a barometer's offset: EKF2 resets its barometer bias at either
     (``EKF2::UpdateBaroSample``). Read as one barometer, the change is a step, which the
-    smoother follows where it is under STEP_SIGMAS (0.5 m beside a real receiver's GPS: 0.73 m
-    RMSE on a PX4 simulator flight); each read as its own barometer, with its own offset."""
+    smoother follows where it is under STEP_SIGMAS (a PX4 simulator flight failed over at 70 %
+    to a barometer 0.3 m higher: 0.161 m RMSE, its GPS's 0.015); each read as its own
+    barometer, with its own offset (0.010 m, whatever the step)."""
     columns = [c for c in ("baro_device_id", "calibration_count") if c in air]
     if not columns:
         return [("", air)]
