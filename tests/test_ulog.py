@@ -433,3 +433,25 @@ def test_a_barometer_device_changing_at_every_sample_is_damage(
         "vehicle_air_data: 623 barometers or calibrations, more than 8: damage, read as one "
         "barometer" in flight.notes
     )
+
+
+def test_the_barometer_with_most_samples_keeps_the_name(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Three first samples logged with ``baro_device_id`` 0 (before the device was set up) are
+    a barometer of their own, ``baro2``; the log's main one stays ``baro`` and the reference
+    (it was ``baro2``, and its CSV column ``alt_baro2_m``)."""
+    import pyulog
+
+    class Early(pyulog.ULog):  # type: ignore[misc]
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            for d in self.data_list:
+                if d.name == "vehicle_air_data":
+                    d.data["baro_device_id"] = d.data["baro_device_id"].copy()
+                    d.data["baro_device_id"][:3] = 0
+
+    monkeypatch.setattr(pyulog, "ULog", Early)
+    flight = read_log(shared_log("px4/pyulog_sample_px4_events.ulg"))
+    baros = {s.name: s for s in flight.sensors if s.kind == "baro"}
+    assert {name: s.t.size for name, s in baros.items()} == {"baro": 620, "baro2": 3}
+    assert "baro_device_id 6620172" in baros["baro"].source
+    assert prepare(flight, FuseOptions()).referred.reference == "baro"

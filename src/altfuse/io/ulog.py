@@ -364,7 +364,7 @@ def _devices(
     air: dict[str, np.ndarray], sensors: _Sensors
 ) -> list[tuple[str, dict[str, np.ndarray]]]:
     """``vehicle_air_data``'s samples per barometer (``baro_device_id``) and calibration
-    (``calibration_count``), in the order each was first met, each named where there are more;
+    (``calibration_count``), the one with the most samples first, each named where there are more;
     a note of the changes. PX4 fails over to another barometer when the selected one fails, and
     a new calibration moves a barometer's offset: EKF2 resets its barometer bias at either
     (``EKF2::UpdateBaroSample``). Read as one barometer, the change is a step, which the
@@ -378,7 +378,10 @@ def _devices(
     changes = int(np.count_nonzero((keys[1:] != keys[:-1]).any(axis=1)))
     if not changes:
         return [("", air)]
-    firsts = sorted(np.unique(keys, axis=0, return_index=True)[1].tolist())
+    _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
+    # the most samples first: the barometer named ``baro`` is the log's main one, whatever a
+    # first sample or two logged before the device was set up say
+    firsts = [int(k) for _, k in sorted(zip(-counts, first, strict=True))]
     if len(firsts) > MAX_BARO_CHANGES:
         sensors.notes.append(
             f"vehicle_air_data: {len(firsts)} barometers or calibrations, more than "
