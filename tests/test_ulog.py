@@ -455,3 +455,36 @@ def test_the_barometer_with_most_samples_keeps_the_name(monkeypatch: pytest.Monk
     assert {name: s.t.size for name, s in baros.items()} == {"baro": 620, "baro2": 3}
     assert "baro_device_id 6620172" in baros["baro"].source
     assert prepare(flight, FuseOptions()).referred.reference == "baro"
+
+
+def test_a_barometer_calibrated_to_the_gnss_on_the_ground_is_no_take_off(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """PX4's GNSS-baro calibration (``SENS_BAR_AUTOCAL``, on by default) moves the barometer's
+    offset to the GNSS altitude on the ground, ``calibration_count`` one more: 30 m at 12 s
+    here, with no land detector logged. Read as one barometer, that step was the take-off
+    (12.0 s, where the vehicle leaves the ground at 20.4 s); each calibration its own, the
+    take-off and the fused heights are the log's as logged."""
+    import pyulog
+
+    log = shared_log("px4/pyulog_sample_px4_events.ulg")
+    unmodified = fuse_log(log, FuseOptions())
+
+    class Calibrated(pyulog.ULog):  # type: ignore[misc]
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            for d in self.data_list:
+                if d.name == "vehicle_land_detected":
+                    del d.data["landed"]
+                if d.name == "vehicle_air_data":
+                    t = d.data["timestamp"]
+                    after = (t - t[0]) / 1e6 > 12.0
+                    d.data["baro_alt_meter"] = d.data["baro_alt_meter"] + 30.0 * after
+                    d.data["calibration_count"] = d.data["calibration_count"] + after
+
+    monkeypatch.setattr(pyulog, "ULog", Calibrated)
+    calibrated = fuse_log(log, FuseOptions())
+    assert calibrated.referred.takeoff_s == pytest.approx(20.4, abs=0.3)
+    assert calibrated.referred.names == ("gps", "baro", "baro2")
+    n = min(calibrated.result.fused.size, unmodified.result.fused.size)
+    assert np.nanmax(np.abs(calibrated.result.fused[:n] - unmodified.result.fused[:n])) < 0.1

@@ -366,7 +366,8 @@ def _devices(
     """``vehicle_air_data``'s samples per barometer (``baro_device_id``) and calibration
     (``calibration_count``), the one with the most samples first, each named where there are more;
     a note of the changes. PX4 fails over to another barometer when the selected one fails, and
-    a new calibration moves a barometer's offset: EKF2 resets its barometer bias at either
+    a new calibration moves a barometer's offset (its GNSS-baro calibration, ``SENS_BAR_AUTOCAL``
+    on by default, to the GNSS altitude on the ground): EKF2 resets its barometer bias at either
     (``EKF2::UpdateBaroSample``). Read as one barometer, the change is a step, which the
     smoother follows where it is under STEP_SIGMAS (a PX4 simulator flight failed over at 70 %
     to a barometer 0.3 m higher: 0.161 m RMSE, its GPS's 0.015); each read as its own
