@@ -7,6 +7,7 @@ import re
 import struct
 import subprocess
 import sys
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -352,34 +353,44 @@ def test_a_distance_sensor_not_facing_down_is_left_out_and_said(
     )
 
 
-def _failing_over(at: float, step_m: float) -> type:
-    """pyulog's ULog with ``vehicle_air_data`` failed over to another barometer at the share
-    ``at`` of its samples' span, ``step_m`` higher from there (``baro_device_id`` one more;
-    a log from before PX4 v1.11 given the column, device 7)."""
+def _patched(
+    monkeypatch: pytest.MonkeyPatch, change: Callable[[str, dict[str, np.ndarray]], object]
+) -> None:
+    """pyulog's ULog made to pass each topic's name and columns through ``change`` (in place)
+    once parsed."""
     import pyulog
 
-    class FailingOver(pyulog.ULog):  # type: ignore[misc]
+    class Changed(pyulog.ULog):  # type: ignore[misc]
         def __init__(self, *args: Any, **kwargs: Any) -> None:
             super().__init__(*args, **kwargs)
             for d in self.data_list:
-                if d.name == "vehicle_air_data":
-                    t = d.data["timestamp"]
-                    after = t > t[0] + at * (t[-1] - t[0])
-                    d.data["baro_alt_meter"] = d.data["baro_alt_meter"] + step_m * after
-                    device = d.data.get("baro_device_id", np.full(t.size, 7, dtype=np.uint32))
-                    d.data["baro_device_id"] = np.where(after, device + 1, device)
+                change(d.name, d.data)
 
-    return FailingOver
+    monkeypatch.setattr(pyulog, "ULog", Changed)
+
+
+def _failing_over(monkeypatch: pytest.MonkeyPatch, at: float, step_m: float) -> None:
+    """``vehicle_air_data`` failed over to another barometer at the share ``at`` of its
+    samples' span, ``step_m`` higher from there (``baro_device_id`` one more; a log from
+    before PX4 v1.11 given the column, device 7)."""
+
+    def change(name: str, data: dict[str, np.ndarray]) -> None:
+        if name == "vehicle_air_data":
+            t = data["timestamp"]
+            after = t > t[0] + at * (t[-1] - t[0])
+            data["baro_alt_meter"] = data["baro_alt_meter"] + step_m * after
+            device = data.get("baro_device_id", np.full(t.size, 7, dtype=np.uint32))
+            data["baro_device_id"] = np.where(after, device + 1, device)
+
+    _patched(monkeypatch, change)
 
 
 def test_each_barometer_px4_fails_over_to_is_its_own(monkeypatch: pytest.MonkeyPatch) -> None:
     """``vehicle_air_data`` from two devices: two barometers, each with its own samples and
     the device (and calibration) in its source, and a note of the change."""
-    import pyulog
-
     log = shared_log("px4/pyulog_sample_px4_events.ulg")
     plain = next(s for s in read_log(log).sensors if s.kind == "baro")
-    monkeypatch.setattr(pyulog, "ULog", _failing_over(0.6, 0.5))
+    _failing_over(monkeypatch, 0.6, 0.5)
     flight = read_log(log)
     baros = [s for s in flight.sensors if s.kind == "baro"]
     assert [s.name for s in baros] == ["baro", "baro2"]
@@ -401,9 +412,7 @@ def test_a_barometer_failover_s_step_is_not_followed(monkeypatch: pytest.MonkeyP
     """A PX4 simulator flight whose barometer fails over at 70 % of the log to one 0.3 m
     higher, under STEP_SIGMAS beside its GPS: read as one barometer, the smoother followed it
     (RMSE 0.161 m, maximum 0.31, against the GPS's 0.015); each device its own, 0.010 m."""
-    import pyulog
-
-    monkeypatch.setattr(pyulog, "ULog", _failing_over(0.7, 0.3))
+    _failing_over(monkeypatch, 0.7, 0.3)
     result = evaluate(shared_log("px4/px4_sitl_yuneec_position.ulg"), ["smoother"], truth="sim")
     v = verdict(result, "smoother")
     assert {"rmse", "max"}.isdisjoint(v["fails"])  # type: ignore[arg-type]
@@ -415,18 +424,14 @@ def test_a_barometer_device_changing_at_every_sample_is_damage(
 ) -> None:
     """A ``baro_device_id`` different at every sample is no vehicle's: one barometer, as
     logged, and a note (each its own would be 623 sensors to fuse)."""
-    import pyulog
 
-    class Scrambled(pyulog.ULog):  # type: ignore[misc]
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            for d in self.data_list:
-                if d.name == "vehicle_air_data":
-                    d.data["baro_device_id"] = np.arange(d.data["timestamp"].size, dtype=np.uint32)
+    def scrambled(name: str, data: dict[str, np.ndarray]) -> None:
+        if name == "vehicle_air_data":
+            data["baro_device_id"] = np.arange(data["timestamp"].size, dtype=np.uint32)
 
     log = shared_log("px4/pyulog_sample_px4_events.ulg")
     plain = read_log(log)
-    monkeypatch.setattr(pyulog, "ULog", Scrambled)
+    _patched(monkeypatch, scrambled)
     flight = read_log(log)
     assert [s.name for s in flight.sensors] == [s.name for s in plain.sensors]
     assert (
@@ -439,17 +444,13 @@ def test_the_barometer_with_most_samples_keeps_the_name(monkeypatch: pytest.Monk
     """Three first samples logged with ``baro_device_id`` 0 (before the device was set up) are
     a barometer of their own, ``baro2``; the log's main one stays ``baro`` and the reference
     (it was ``baro2``, and its CSV column ``alt_baro2_m``)."""
-    import pyulog
 
-    class Early(pyulog.ULog):  # type: ignore[misc]
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            for d in self.data_list:
-                if d.name == "vehicle_air_data":
-                    d.data["baro_device_id"] = d.data["baro_device_id"].copy()
-                    d.data["baro_device_id"][:3] = 0
+    def early(name: str, data: dict[str, np.ndarray]) -> None:
+        if name == "vehicle_air_data":
+            data["baro_device_id"] = data["baro_device_id"].copy()
+            data["baro_device_id"][:3] = 0
 
-    monkeypatch.setattr(pyulog, "ULog", Early)
+    _patched(monkeypatch, early)
     flight = read_log(shared_log("px4/pyulog_sample_px4_events.ulg"))
     baros = {s.name: s for s in flight.sensors if s.kind == "baro"}
     assert {name: s.t.size for name, s in baros.items()} == {"baro": 620, "baro2": 3}
@@ -465,26 +466,20 @@ def test_a_barometer_calibrated_to_the_gnss_on_the_ground_is_no_take_off(
     here, with no land detector logged. Read as one barometer, that step was the take-off
     (12.0 s, where the vehicle leaves the ground at 20.4 s); each calibration its own, the
     take-off and the fused heights are the log's as logged."""
-    import pyulog
+
+    def calibrated(name: str, data: dict[str, np.ndarray]) -> None:
+        data.pop("landed", None)  # vehicle_land_detected's
+        if name == "vehicle_air_data":
+            after = (data["timestamp"] - data["timestamp"][0]) / 1e6 > 12.0
+            data["baro_alt_meter"] = data["baro_alt_meter"] + 30.0 * after
+            data["calibration_count"] = data["calibration_count"] + after
 
     log = shared_log("px4/pyulog_sample_px4_events.ulg")
     unmodified = fuse_log(log, FuseOptions())
-
-    class Calibrated(pyulog.ULog):  # type: ignore[misc]
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            for d in self.data_list:
-                if d.name == "vehicle_land_detected":
-                    del d.data["landed"]
-                if d.name == "vehicle_air_data":
-                    t = d.data["timestamp"]
-                    after = (t - t[0]) / 1e6 > 12.0
-                    d.data["baro_alt_meter"] = d.data["baro_alt_meter"] + 30.0 * after
-                    d.data["calibration_count"] = d.data["calibration_count"] + after
-
-    monkeypatch.setattr(pyulog, "ULog", Calibrated)
-    calibrated = fuse_log(log, FuseOptions())
-    assert calibrated.referred.takeoff_s == pytest.approx(20.4, abs=0.3)
-    assert calibrated.referred.names == ("gps", "baro", "baro2")
-    n = min(calibrated.result.fused.size, unmodified.result.fused.size)
-    assert np.nanmax(np.abs(calibrated.result.fused[:n] - unmodified.result.fused[:n])) < 0.1
+    _patched(monkeypatch, calibrated)
+    calibrated_run = fuse_log(log, FuseOptions())
+    assert calibrated_run.referred.takeoff_s == pytest.approx(20.4, abs=0.3)
+    assert calibrated_run.referred.names == ("gps", "baro", "baro2")
+    n = min(calibrated_run.result.fused.size, unmodified.result.fused.size)
+    fused = calibrated_run.result.fused[:n]
+    assert np.nanmax(np.abs(fused - unmodified.result.fused[:n])) < 0.1
