@@ -9,10 +9,12 @@ import pytest
 
 from altfuse.align import Aligned
 from altfuse.datum import (
+    DATUM_RATE_HZ,
     Track,
     Wind,
     _either_search,
     _robust_fit,
+    coarser_than_datum,
     detector_takeoffs,
     dynamic_head,
     on_clock,
@@ -692,3 +694,12 @@ def test_the_take_offs_of_a_sampled_verdict_are_its_turns_from_landed_to_flying(
     landed = Samples(np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]), np.array([1, 1, 0, 0, 1, 0.0]))
     assert detector_takeoffs(landed) == (3.0, 6.0)
     assert detector_takeoffs(None) == ()
+
+
+def test_a_clock_is_coarser_than_the_datum_s_below_its_rate_not_at_its_step_s_rounding() -> None:
+    """The pipeline (given ``--rate``) and the guard (given the clock's step) ask alike."""
+    assert coarser_than_datum(5.0)
+    assert coarser_than_datum(9.9)
+    assert not coarser_than_datum(DATUM_RATE_HZ)
+    assert not coarser_than_datum(1.0 / (1.0 / DATUM_RATE_HZ * (1 + 1e-12)))
+    assert not coarser_than_datum(50.0)

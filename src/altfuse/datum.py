@@ -63,6 +63,8 @@ MIN_WINDOW_TICKS = 3
 #: refused (the GPS had too few ticks beside the barometer to be referred), the other two
 #: 0.2 and 0.5 m off at most; at 1-2 Hz by up to 0.1 m (the noisy 3.3 plane aside).
 DATUM_RATE_HZ = 10.0
+
+
 #: A rangefinder valid on less of the ground window than this reads below its minimum range
 #: there: its valid readings are the noise's tail above the minimum, biased high (a mount 0.1 m
 #: up under a 0.2 m minimum gave an offset of 0.29 m), and its datum is found as without any.
@@ -1190,6 +1192,13 @@ def referred_samples(sensors: Sequence[Series], referred: Referred) -> tuple[Sam
         value, keep = _referred_values(referred, o, s.t, s.value)
         out.append(Samples(*merge_duplicates(s.t[keep], value[keep])))
     return tuple(out)
+
+
+def coarser_than_datum(rate_hz: float) -> bool:
+    """Whether a clock of ``rate_hz`` is coarser than the datum's (DATUM_RATE_HZ): its sensor
+    columns are means over cells wider than the datum's ticks. A rate read back from a clock's
+    step (``1 / dt``) within rounding of DATUM_RATE_HZ is not."""
+    return rate_hz * (1.0 + 1e-9) < DATUM_RATE_HZ
 
 
 def on_clock(referred: Referred, aligned: Aligned, datum_rate_hz: float) -> Referred:

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from altfuse.datum import DATUM_RATE_HZ
+from altfuse.datum import coarser_than_datum
 from altfuse.fuse.base import DIVERGED, FusionInput, FusionResult
 from altfuse.metrics import envelope, runs, white_noise_sigma
 from altfuse.model import FloatArray
@@ -72,7 +72,7 @@ def sensor_heights(inputs: FusionInput) -> FloatArray:
     tick. Against the 5 s means alone at 0.2 Hz the smoother's estimates in the planes'
     climbing turns, within 0.3 m of the truth, lay up to 11 m outside every sensor; against
     the samples alone, mean's."""
-    if inputs.dt_s * DATUM_RATE_HZ <= 1.0 + 1e-9:
+    if not coarser_than_datum(1.0 / inputs.dt_s):
         return inputs.z
     at_ticks = np.full(inputs.z.shape, np.nan)
     for j, s in enumerate(inputs.samples):
