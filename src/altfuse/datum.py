@@ -63,8 +63,6 @@ MIN_WINDOW_TICKS = 3
 #: refused (the GPS had too few ticks beside the barometer to be referred), the other two
 #: 0.2 and 0.5 m off at most; at 1-2 Hz by up to 0.1 m (the noisy 3.3 plane aside).
 DATUM_RATE_HZ = 10.0
-
-
 #: A rangefinder valid on less of the ground window than this reads below its minimum range
 #: there: its valid readings are the noise's tail above the minimum, biased high (a mount 0.1 m
 #: up under a 0.2 m minimum gave an offset of 0.29 m), and its datum is found as without any.
@@ -777,9 +775,7 @@ def _refer(
     while pending:
         left = []
         for i in pending:
-            found = _offset(
-                i, aligned, ground, scales.get(i), (h, [ref, *(j for j in offsets if j != ref)])
-            )
+            found = _offset(i, aligned, ground, scales.get(i), (h, list(offsets)))
             if found is None:
                 left.append(i)
                 continue

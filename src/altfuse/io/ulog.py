@@ -357,7 +357,7 @@ def _read_baro(topics: _Topics, sensors: _Sensors) -> None:
 #: Most barometer devices and calibrations a log's ``vehicle_air_data`` is read as, each its own
 #: barometer: PX4 carries at most 4 barometers (``MAX_SENSOR_COUNT``), and a calibration or two
 #: more is a lot; more is damage, and each would be one more sensor to fuse.
-MAX_BARO_CHANGES = 8
+MAX_BAROMETERS = 8
 
 
 def _devices(
@@ -376,31 +376,33 @@ def _devices(
     if not columns:
         return [("", air)]
     keys = np.column_stack([air[c].astype(np.int64) for c in columns])
-    changes = int(np.count_nonzero((keys[1:] != keys[:-1]).any(axis=1)))
-    if not changes:
+    unique, first, inverse, counts = np.unique(
+        keys, axis=0, return_index=True, return_inverse=True, return_counts=True
+    )
+    inverse = inverse.reshape(-1)
+    if len(unique) < 2:
         return [("", air)]
-    _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
-    # the most samples first: the barometer named ``baro`` is the log's main one, whatever a
-    # first sample or two logged before the device was set up say
-    firsts = [int(k) for _, k in sorted(zip(-counts, first, strict=True))]
-    if len(firsts) > MAX_BARO_CHANGES:
+    if len(unique) > MAX_BAROMETERS:
         sensors.notes.append(
-            f"vehicle_air_data: {len(firsts)} barometers or calibrations, more than "
-            f"{MAX_BARO_CHANGES}: damage, read as one barometer"
+            f"vehicle_air_data: {len(unique)} barometers or calibrations, more than "
+            f"{MAX_BAROMETERS}: damage, read as one barometer"
         )
         return [("", air)]
-    named = [
-        (", ".join(f"{c} {v}" for c, v in zip(columns, keys[k].tolist(), strict=True)), keys[k])
-        for k in firsts
+    # the most samples first: the barometer named ``baro`` is the log's main one, whatever a
+    # first sample or two logged before the device was set up say
+    order = sorted(range(len(unique)), key=lambda u: (-counts[u], first[u]))
+    names = [
+        ", ".join(f"{c} {v}" for c, v in zip(columns, unique[u].tolist(), strict=True))
+        for u in order
     ]
+    changes = int(np.count_nonzero(np.diff(inverse)))
     sensors.notes.append(
         f"vehicle_air_data: the barometer or its calibration changed {changes} "
-        f"time{'s' if changes > 1 else ''} ({'; '.join(name for name, _ in named)}): each read "
-        "as its own barometer"
+        f"time{'s' if changes > 1 else ''} ({'; '.join(names)}): each read as its own barometer"
     )
     return [
-        (f" ({name})", {c: v[(keys == key).all(axis=1)] for c, v in air.items()})
-        for name, key in named
+        (f" ({name})", {c: v[inverse == u] for c, v in air.items()})
+        for u, name in zip(order, names, strict=True)
     ]
 
 
