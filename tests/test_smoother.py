@@ -507,8 +507,9 @@ def _regained(seed: int, jump_m: float) -> tuple[FusionInput, np.ndarray, np.nda
 def test_a_sensor_regained_elsewhere_is_its_jump_where_the_likelihood_says_so() -> None:
     """The barometer regained 2 m higher: 5.6 sigma across its gap, under the sure steps' 10;
     taken as a tentative step, the likelihood makes it the barometer's jump and the height
-    stays on the truth (without it the smoother followed the barometer 2.0 m up). A tentative
-    step where nothing jumped is not taken: the height as without it."""
+    stays on the truth (without it the smoother followed the barometer 2.0 m up, until the GPS
+    was offered as stable beside the barometer's drift: 0.020 m, the drift taken). A
+    tentative step where nothing jumped is not taken: the height as without it."""
     inputs, h, t = _regained(6, 2.0)
     (step,) = find_steps(t, inputs.z, inputs.names, inputs.kinds)
     assert step.tentative
@@ -519,8 +520,6 @@ def test_a_sensor_regained_elsewhere_is_its_jump_where_the_likelihood_says_so() 
     assert float(size) == pytest.approx(2.0, abs=0.3)
     after = t >= 70.0
     assert np.sqrt(np.mean((res.fused[after] - h[after]) ** 2)) < 0.05
-    plain = fuse_smoother(inputs, SmootherParams())
-    assert np.sqrt(np.mean((plain.fused[after] - h[after]) ** 2)) > 1.5
     inputs, h, t = _regained(0, 0.0)
     made_up = replace(inputs, tentative=((64.95, (0, 1), 2.0, 5.0),))
     res = fuse_smoother(made_up, SmootherParams())

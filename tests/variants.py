@@ -22,6 +22,9 @@ and alignment:
   1); a plane's as logged (its static port: ``k`` 1 would be 108 m at the 3.3 plane's 46 m/s);
 - ``windy-<w>``: the same with ``k`` 1 at the airspeed in a steady wind of ``w`` m/s blowing
   to the east (the ground velocity from the GPS's speed and course, less the wind);
+- ``drift-<m>``: each barometer ``m`` metres higher per 10 minutes, from its first sample on (a
+  board warming, the weather: "2-3 m over flights of up to 20 minutes", an ArduPilot user's
+  foam-covered barometers, discuss.ardupilot.org/t/25952);
 - ``rezero-<s>``: the barometers 2 m high until ``s`` seconds before the take-off (the
   datum's), where the autopilot re-zeroed them (Copter arming without a home), read as altfuse
   reads such a log (``EV`` ``EKF_ALT_RESET`` there: :func:`altfuse.io.dataflash.rejoined`).
@@ -104,6 +107,11 @@ def _rezeroed(flight: FlightLog, lead_s: float) -> FlightLog:
     return _each(flight, "baro", read)
 
 
+def _drifted(s: Series, _rng: np.random.Generator, per_10_min: str) -> Series:
+    """``per_10_min`` metres higher per 10 minutes since the first sample."""
+    return replace(s, value=s.value + float(per_10_min) * (s.t - s.t[0]) / 600.0)
+
+
 def _noisy(s: Series, rng: np.random.Generator, _: str) -> Series:
     """0.3 m of white noise and a random walk of 0.01 m^2/s (a real receiver's)."""
     dt = np.maximum(np.diff(s.t, prepend=s.t[0]), 0.0)
@@ -119,6 +127,7 @@ CHANGES: dict[str, tuple[tuple[str, ...] | None, Callable[..., Series]]] = {
     "step": (None, _stepped),
     "noisy": (None, _noisy),
     "regain": (None, _regained),
+    "drift": (("baro",), _drifted),
 }
 
 

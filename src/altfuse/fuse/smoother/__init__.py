@@ -159,9 +159,11 @@ barometer the GPS's wander (hover RMSE 0.35 m against 0.07 m with the defaults).
 does tell is which of two physical models fits it: a GPS that wanders, or one as stable as a
 barometer (``Q_OFFSET_STABLE_GPS``: an RTK fix, a simulator's GPS), kept where it raises the
 samples' log-likelihood by ``STABLE_GAIN`` (:func:`.evidence.gps_evidence`; recorded as
-``gps_stable``). Every ArduPilot copter simulator log here gains 25-222 from it (the 92 m climb,
-its barometer noisy: 0.045 -> 0.027 m RMSE), altfuse's simulated flights and the real logs
-nothing.
+``gps_stable``), each model with the barometers' drift rates where they gain (a barometer
+drifting from a stable GPS made the stable model lose alone). Every ArduPilot copter simulator
+log here gains 25-222 from it (the 92 m climb, its barometer noisy: 0.045 -> 0.027 m RMSE; the
+9 m sonar flight with its barometer drifting 3 m in 10 minutes 0.432 -> 0.001 m), altfuse's
+simulated flights and the real logs nothing.
 :class:`SmootherParams` overrides (``--sigma``, ``--offset-noise``, ``--accel-noise``, ``--gate``).
 
 Innovation gating: a sample whose innovation exceeds ``gate`` standard deviations (3.5) is
@@ -756,7 +758,7 @@ def _gps_stability(
     stable = ev.q_state.copy()
     offsets = offset_noise(inputs, {}, Q_OFFSET_STABLE_GPS)[np.newaxis, :]
     stable[:, steady] = with_jumps(offsets, steps, ev.t)[:, steady]
-    return gps_evidence(ev, r, layout, stable)
+    return gps_evidence(ev, r, layout, stable, inputs.kinds)
 
 
 def model_check(nis: Mapping[str, float]) -> str:

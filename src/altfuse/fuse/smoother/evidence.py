@@ -115,11 +115,11 @@ def _made_of(made: Made | None, events: Events, layout: Layout) -> dict[str, np.
 
 
 def gps_evidence(
-    ev: Events, r: FloatArray, layout: Layout, stable: FloatArray
+    ev: Events, r: FloatArray, layout: Layout, stable: FloatArray, kinds: Sequence[str]
 ) -> tuple[Events, float, Made]:
     """``ev`` with its GPS offsets' random walks as stable as a barometer's (``stable``, the
     offsets' densities per event) where the log's evidence asks for it, that evidence, and the
-    forward pass of the events chosen.
+    forward pass of the events chosen (its sensors' ``kinds``).
 
     A GPS's vertical error wanders by about a metre over minutes, and the default prefers the
     barometer's level to it; an RTK fix, or a simulator's GPS, is as stable as the barometer,
@@ -128,12 +128,42 @@ def gps_evidence(
     half the true error). The offsets' wander is not split by the log otherwise: with two
     sensors it fixes only their sum (the module doc of :mod:`altfuse.fuse.smoother`). Tested
     first: the barometer's tests are made with the offsets chosen here.
+
+    A barometer that drifts (a board warming) parts from a stable GPS: without its drift the
+    stable GPS explains the log worse than a wandering one, whose offset then takes the
+    drift, and the fused height follows the barometer. Each GPS model is therefore offered
+    with the barometers' drift rates too (:func:`stable_gain`); whether they drift is decided
+    later, by :func:`drift_evidence`. The simulators' 9 m sonar flight with its barometer
+    drifting 3 m in 10 minutes: the stable GPS alone -805, with the drift +101; the fused
+    height had followed the barometer, 0.43 m RMSE.
     """
     trial = replace(ev, q_state=stable)
-    default, richer = likelihoods((ev, r, layout), (trial, r, layout))
-    gain = evidence_gain(default, richer)
+    models = [(ev, r, layout), (trial, r, layout)]
+    if "baro" in kinds:
+        drifting = layout.with_drift(kinds)
+        models += [(ev, r, drifting), (trial, r, drifting)]
+    default, richer, *drifted = likelihoods(*models)
+    gain = stable_gain(default, richer, drifted)
     chosen, verdicts = (trial, richer) if gain > STABLE_GAIN else (ev, default)
     return chosen, gain, Made(chosen, layout, verdicts)
+
+
+def stable_gain(
+    default: dict[str, np.ndarray],
+    stable: dict[str, np.ndarray],
+    drifted: Sequence[dict[str, np.ndarray]] = (),
+) -> float:
+    """The stable GPS's log-likelihood gain over the wandering one's (the passes ``default``
+    and ``stable``); with ``drifted``, the same two passes with the barometers' drift rates,
+    each GPS model's best against the other's: with the drift where it gains DRIFT_GAIN over
+    the same model without, as :func:`drift_evidence` keeps it."""
+    gain = evidence_gain(default, stable)
+    if not drifted:
+        return gain
+    wandering_drift, stable_drift = (evidence_gain(default, d) for d in drifted)
+    best_wandering = wandering_drift if wandering_drift > DRIFT_GAIN else 0.0
+    best_stable = stable_drift if stable_drift > gain + DRIFT_GAIN else gain
+    return best_stable - best_wandering
 
 
 def scale_evidence(
