@@ -282,19 +282,24 @@ def test_a_barometer_s_step_found_against_the_gps_is_free_against_the_rangefinde
     assert baro_offset.scale == pytest.approx(1.05, abs=0.01)
 
 
-def test_the_second_step_search_keeps_the_first_s_steps_it_did_not_find() -> None:
+def test_the_second_step_search_keeps_the_first_s_steps_across_a_gap_it_did_not_find() -> None:
     """The steps sought again on the scaled heights replace the first search's between the
     same sensors at the same place (within 2 s, or the gap a step lies in); the first's others
-    stay: across a climb's gap the unscaled barometer misreads a step's size (the 3.3 plane's
-    GPS regained 2 m higher: -6.0 m) but not that it is there."""
+    across a gap stay: there the unscaled barometer misreads a step's size (the 3.3 plane's
+    GPS regained 2 m higher: -6.0 m) but not that it is there. One between two ticks that the
+    scaled heights do not have is the scale's, and goes."""
     across_gap = Step(162.45, "gps", "baro", -5.96, 10.5, 5.15)
-    elsewhere = Step(40.0, "gps", "baro", 1.0, 12.0)
-    first = (elsewhere, across_gap)
-    assert _either_search(first, ()) == first
+    between_ticks = Step(40.05, "gps", "baro", 1.0, 12.0, 0.05)
+    first = (between_ticks, across_gap)
+    assert _either_search(first, (), 0.1) == (across_gap,)
     measured_again = Step(165.0, "gps", "baro", -2.1, 6.2, 5.0)
-    assert _either_search(first, (measured_again,)) == (elsewhere, measured_again)
+    assert _either_search(first, (measured_again,), 0.1) == (measured_again,)
     other_pair = Step(162.45, "gps", "baro2", -2.0, 11.0, 5.15)
-    assert _either_search(first, (other_pair,)) == (elsewhere, other_pair, across_gap)
+    assert _either_search(first, (other_pair,), 0.1) == (other_pair, across_gap)
+    found_again = Step(40.05, "gps", "baro", 1.02, 11.0, 0.05)
+    assert _either_search(first, (found_again,), 0.1) == (found_again, across_gap)
+    one_tick_gap = Step(40.1, "gps", "baro", 1.0, 12.0, 0.1)
+    assert _either_search((one_tick_gap,), (), 0.1) == (one_tick_gap,)
 
 
 def test_a_scale_fit_with_too_few_rows_to_reject_from_keeps_them() -> None:

@@ -25,6 +25,9 @@ and alignment:
 - ``drift-<m>``: each barometer ``m`` metres higher per 10 minutes, from its first sample on (a
   board warming, the weather: "2-3 m over flights of up to 20 minutes", an ArduPilot user's
   foam-covered barometers, discuss.ardupilot.org/t/25952);
+- ``scale-<pct>``: each barometer reading every height change ``pct`` % larger (a plane's
+  static port, a barometer's error: "ab. 6 % higher than GPS" in all of an ArduPlane user's
+  logs, the same thread);
 - ``rezero-<s>``: the barometers 2 m high until ``s`` seconds before the take-off (the
   datum's), where the autopilot re-zeroed them (Copter arming without a home), read as altfuse
   reads such a log (``EV`` ``EKF_ALT_RESET`` there: :func:`altfuse.io.dataflash.rejoined`).
@@ -112,6 +115,12 @@ def _drifted(s: Series, _rng: np.random.Generator, per_10_min: str) -> Series:
     return replace(s, value=s.value + float(per_10_min) * (s.t - s.t[0]) / 600.0)
 
 
+def _scaled(s: Series, _rng: np.random.Generator, percent: str) -> Series:
+    """Every change from the first sample ``percent`` % larger."""
+    first = s.value[0]
+    return replace(s, value=first + (s.value - first) * (1.0 + float(percent) / 100.0))
+
+
 def _noisy(s: Series, rng: np.random.Generator, _: str) -> Series:
     """0.3 m of white noise and a random walk of 0.01 m^2/s (a real receiver's)."""
     dt = np.maximum(np.diff(s.t, prepend=s.t[0]), 0.0)
@@ -128,6 +137,7 @@ CHANGES: dict[str, tuple[tuple[str, ...] | None, Callable[..., Series]]] = {
     "noisy": (None, _noisy),
     "regain": (None, _regained),
     "drift": (("baro",), _drifted),
+    "scale": (("baro",), _scaled),
 }
 
 
