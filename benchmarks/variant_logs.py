@@ -11,9 +11,9 @@ windy-3 drift-3 scale-5]
 The variants (``tests/variants.py``, which the tests use too): ``no-<kind>``, ``no-imu``,
 ``rate-<hz>``, ``gps-<hz>``, ``spikes-<kind>``, ``noisy-<kind>``, ``step-<kind>``,
 ``regain-<kind>``, ``airflow-<k>``, ``windy-<w>``, ``rezero-<s>``, ``drift-<m>``, ``scale-<pct>``,
-joined by ``+`` (``gps-<hz>``, ``step-<kind>``, ``regain-<kind>``, ``rezero-<s>``, ``drift-<m>``,
-``scale-<pct>`` and ``windy-<w>`` but ``windy-3``, ``drift-3`` and ``scale-5`` not in the
-default set).
+``flash-<m>``, joined by ``+`` (``gps-<hz>``, ``step-<kind>``, ``regain-<kind>``, ``rezero-<s>``,
+``drift-<m>``, ``scale-<pct>``, ``flash-<m>`` and ``windy-<w>`` but ``windy-3``, ``drift-3`` and
+``scale-5`` not in the default set).
 
 Per log and variant: the smoother's RMSE, maximum error and +-2 sigma coverage against
 ``SIM.Alt``, the checks of the project's bar it fails (``tests/accuracy.py``'s ``verdict``;

@@ -28,6 +28,9 @@ and alignment:
 - ``scale-<pct>``: each barometer reading every height change ``pct`` % larger (a plane's
   static port, a barometer's error: "ab. 6 % higher than GPS" in all of an ArduPlane user's
   logs, the same thread);
+- ``flash-<m>``: each barometer ``m`` metres higher from half-way through its span, settling
+  back with a time constant of 5 s (light on the sensor: "an immediate change in altitude and
+  around a 15 second correction", a diydrones.com user's barometer under a lamp);
 - ``rezero-<s>``: the barometers 2 m high until ``s`` seconds before the take-off (the
   datum's), where the autopilot re-zeroed them (Copter arming without a home), read as altfuse
   reads such a log (``EV`` ``EKF_ALT_RESET`` there: :func:`altfuse.io.dataflash.rejoined`).
@@ -121,6 +124,16 @@ def _scaled(s: Series, _rng: np.random.Generator, percent: str) -> Series:
     return replace(s, value=first + (s.value - first) * (1.0 + float(percent) / 100.0))
 
 
+def _flashed(s: Series, _rng: np.random.Generator, metres: str) -> Series:
+    """``metres`` higher from half-way through the span, settling back (a 5 s time constant)."""
+    since = s.t - (s.t[0] + 0.5 * (s.t[-1] - s.t[0]))
+    return replace(
+        s,
+        value=s.value
+        + np.where(since >= 0.0, float(metres), 0.0) * np.exp(-np.maximum(since, 0.0) / 5.0),
+    )
+
+
 def _noisy(s: Series, rng: np.random.Generator, _: str) -> Series:
     """0.3 m of white noise and a random walk of 0.01 m^2/s (a real receiver's)."""
     dt = np.maximum(np.diff(s.t, prepend=s.t[0]), 0.0)
@@ -138,6 +151,7 @@ CHANGES: dict[str, tuple[tuple[str, ...] | None, Callable[..., Series]]] = {
     "regain": (None, _regained),
     "drift": (("baro",), _drifted),
     "scale": (("baro",), _scaled),
+    "flash": (("baro",), _flashed),
 }
 
 
