@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import ctypes
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -35,3 +37,39 @@ def test_freed_arrays_in_a_fragmented_heap_go_back_to_the_system() -> None:
     release_free_memory()
     assert before - anonymous_mb() > 100
     assert sum(float(a[0]) for a in kept) == len(kept)  # the arrays kept are intact
+
+
+HEAPS = """
+import ctypes, sys, tempfile, threading
+import numpy as np
+from altfuse.memory import one_heap
+if sys.argv[1] == "one":
+    one_heap()
+kept = []
+threads = [threading.Thread(target=lambda: kept.append(np.ones(1000))) for _ in range(3)]
+for thread in threads:
+    thread.start()
+for thread in threads:
+    thread.join()
+libc = ctypes.CDLL(None)
+libc.fopen.restype = ctypes.c_void_p
+with tempfile.NamedTemporaryFile(suffix=".xml") as out:
+    stream = libc.fopen(out.name.encode(), b"w")
+    libc.malloc_info(0, ctypes.c_void_p(stream))
+    libc.fclose(ctypes.c_void_p(stream))
+    print(open(out.name).read().count("<heap nr="))
+"""
+
+
+@pytest.mark.skipif(getattr(ctypes.CDLL(None), "malloc_info", None) is None, reason="glibc only")
+def test_threads_take_their_memory_from_one_heap() -> None:
+    """glibc gives each new thread that allocates a heap of its own; after ``one_heap`` the
+    threads share the first (the smoother's passes in threads: :func:`altfuse.memory.one_heap`)."""
+    heaps = {
+        how: int(subprocess.run(
+            [sys.executable, "-c", HEAPS, how], capture_output=True, text=True, check=True
+        ).stdout)
+        for how in ("one", "default")
+    }  # fmt: skip
+    assert heaps["one"] == 1
+    assert heaps["default"] > 1, heaps

@@ -44,6 +44,7 @@ from altfuse.errors import AltfuseError, LogReadError, ParameterError, Refusal, 
 from altfuse.files import COMPRESSIONS, compression_named
 from altfuse.io import sha256_of
 from altfuse.job import FileRun, Outputs, fuse_to_files
+from altfuse.memory import one_heap
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
 from altfuse.signals import EXIT_TERMINATED, Terminated, interruption, watch_signals
@@ -426,7 +427,9 @@ def _worker_start(parent: int, started: Any) -> None:
     parent dies (``PR_SET_PDEATHSIG``), so that a killed batch does not leave workers writing
     on. ``started`` is the queue on which it says which job it starts. Each worker computes on
     one thread (a BLAS pool forked from a parent that loaded numpy would spin beside the other
-    workers: see ``altfuse.cli``)."""
+    workers: see ``altfuse.cli``), its threads from one C heap (:func:`altfuse.memory.one_heap`:
+    a forked worker has it from the command line, one started anew not)."""
+    one_heap()
     _worker.started = started
     threadpool_limits(1)
     signal.signal(signal.SIGTERM, _worker_signal)

@@ -26,6 +26,7 @@ import click
 
 from altfuse import __version__
 from altfuse.errors import AltfuseError, out_of_memory, system_refused
+from altfuse.memory import one_heap
 from altfuse.params import InvalidParameter
 from altfuse.signals import (
     ENDING,
@@ -240,6 +241,7 @@ def _exit_now() -> None:
 
 
 def main() -> None:
+    one_heap()  # before any thread allocates
     atexit.register(_exit_now)
     for name in THREAD_POOLS:  # before numpy is loaded: it sizes its pool then
         os.environ.setdefault(name, "1")

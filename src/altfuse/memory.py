@@ -18,17 +18,33 @@ from functools import cache
 
 
 @cache
-def _trim() -> Callable[[int], int] | None:
-    """glibc's ``malloc_trim``, where the process has it (not on macOS, Windows or musl)."""
+def _libc(name: str) -> Callable[..., int] | None:
+    """glibc's function ``name``, where the process has it (not on macOS, Windows or musl)."""
     try:
-        trim: Callable[[int], int] | None = getattr(ctypes.CDLL(None), "malloc_trim", None)
+        found: Callable[..., int] | None = getattr(ctypes.CDLL(None), name, None)
     except OSError:
         return None
-    return trim
+    return found
 
 
 def release_free_memory() -> None:
     """Give the C heap's free pages back to the system, where the C library can."""
-    trim = _trim()
+    trim = _libc("malloc_trim")
     if trim is not None:
         trim(0)
+
+
+#: mallopt's parameter for the most heaps ("arenas") glibc's allocator keeps (malloc.h).
+_M_ARENA_MAX = -8
+
+
+def one_heap() -> None:
+    """Have every thread of the process take its memory from one C heap, where the C library
+    can (glibc's ``MALLOC_ARENA_MAX=1``). glibc gives each thread that allocates while another
+    does a heap of its own, up to eight per core; the smoother's likelihood passes run in
+    threads, each filling its arrays from its thread's heap, and the holes they leave there
+    are neither given back by ``malloc_trim`` nor reused by the next stage's arrays. Set
+    before the first thread starts (the command line's start)."""
+    mallopt = _libc("mallopt")
+    if mallopt is not None:
+        mallopt(_M_ARENA_MAX, 1)
