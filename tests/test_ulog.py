@@ -483,3 +483,24 @@ def test_a_barometer_calibrated_to_the_gnss_on_the_ground_is_no_take_off(
     n = min(calibrated_run.result.fused.size, unmodified.result.fused.size)
     fused = calibrated_run.result.fused[:n]
     assert np.nanmax(np.abs(fused - unmodified.result.fused[:n])) < 0.1
+
+
+def test_an_old_log_s_barometer_without_its_temperature_is_read(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """PX4 before v1.7 logs its barometer in ``sensor_combined``; with the temperature's column
+    gone (a bit flipped in its format's name: ``tests/fuzz_long.py``, seed 18) the read ended
+    in an internal error (KeyError). The barometer is read, without a temperature."""
+    log = shared_log("px4/pyulog_sample_appended_multiple.ulg")
+    assert "baro" in read_log(log).temperatures
+
+    def lost(name: str, data: dict[str, np.ndarray]) -> None:
+        if name == "sensor_combined":
+            del data["baro_temp_celcius"]
+
+    _patched(monkeypatch, lost)
+    flight = read_log(log)
+    (baro,) = (s for s in flight.sensors if s.kind == "baro")
+    assert baro.source == "sensor_combined.baro_alt_meter"
+    assert baro.t.size > 100
+    assert "baro" not in flight.temperatures

@@ -328,7 +328,9 @@ def _read_baro(topics: _Topics, sensors: _Sensors) -> None:
     elif combined is not None and not topics.of("sensor_baro"):  # PX4 before v1.7
         stamp = combined["timestamp"] + combined["baro_timestamp_relative"].astype(np.int64)
         fresh = np.concatenate(([True], np.diff(stamp) != 0))  # repeated until the next sample
-        d = {"timestamp": stamp[fresh], "baro_temp_celcius": combined["baro_temp_celcius"][fresh]}
+        d = {"timestamp": stamp[fresh]}
+        if "baro_temp_celcius" in combined:  # not where a damaged format lost the column
+            d["baro_temp_celcius"] = combined["baro_temp_celcius"][fresh]
         value = combined["baro_alt_meter"][fresh]
         sources = [("sensor_combined.baro_alt_meter", d, value)]
     else:
