@@ -317,6 +317,20 @@ def pressure_altitude(pressure_pa: FloatArray) -> FloatArray:
     return np.asarray(_ISA_SCALE_M * (1.0 - np.power(ratio, _ISA_EXPONENT)))
 
 
+def _combined_baro(
+    combined: dict[str, np.ndarray],
+) -> tuple[str, dict[str, np.ndarray], np.ndarray]:
+    """PX4's barometer before v1.7, in ``sensor_combined``: each sample once (it is repeated
+    until the next), at its own time, with its temperature where the topic has it (a damaged
+    format may have lost the column)."""
+    stamp = combined["timestamp"] + combined["baro_timestamp_relative"].astype(np.int64)
+    fresh = np.concatenate(([True], np.diff(stamp) != 0))
+    d = {"timestamp": stamp[fresh]}
+    if "baro_temp_celcius" in combined:
+        d["baro_temp_celcius"] = combined["baro_temp_celcius"][fresh]
+    return "sensor_combined.baro_alt_meter", d, combined["baro_alt_meter"][fresh]
+
+
 def _read_baro(topics: _Topics, sensors: _Sensors) -> None:
     air = topics.first("vehicle_air_data", "baro_alt_meter")
     combined = topics.first("sensor_combined", "baro_alt_meter", "baro_timestamp_relative")
@@ -326,13 +340,7 @@ def _read_baro(topics: _Topics, sensors: _Sensors) -> None:
             for which, d in _devices(air, sensors)
         ]
     elif combined is not None and not topics.of("sensor_baro"):  # PX4 before v1.7
-        stamp = combined["timestamp"] + combined["baro_timestamp_relative"].astype(np.int64)
-        fresh = np.concatenate(([True], np.diff(stamp) != 0))  # repeated until the next sample
-        d = {"timestamp": stamp[fresh]}
-        if "baro_temp_celcius" in combined:  # not where a damaged format lost the column
-            d["baro_temp_celcius"] = combined["baro_temp_celcius"][fresh]
-        value = combined["baro_alt_meter"][fresh]
-        sources = [("sensor_combined.baro_alt_meter", d, value)]
+        sources = [_combined_baro(combined)]
     else:
         sources = []
         for k, d in enumerate(topics.of("sensor_baro")):
