@@ -535,8 +535,8 @@ def test_a_barometer_s_flash_is_no_drift_of_a_stable_gps_s_barometer() -> None:
     own drift explained it better, and the drift test, which asks that too, then left the
     drift out: a stable GPS without what made it win, 0.254 m RMSE. The stable GPS's drift is
     the barometer's only where it wins against the receivers' own (0.041 m)."""
-    evaluation = evaluate_prepared(changed(CLIMB_305.removeprefix("truth/"), "flash-3"),
-                                   ["smoother"], truth="sim")  # fmt: skip
+    prepared = changed(CLIMB_305.removeprefix("truth/"), "flash-3")
+    evaluation = evaluate_prepared(prepared, ["smoother"], truth="sim")
     assert evaluation.runs["smoother"].result.params["gps_stable"] != "modelled"
     result = verdict(evaluation, "smoother")
     assert isinstance(result["rmse"], float)

@@ -74,10 +74,14 @@ def _spiked(s: Series, rng: np.random.Generator, _: str) -> Series:
     return replace(s, value=s.value + hit * jump)
 
 
+def _half_way(s: Series) -> float:
+    """The time [s] half-way through the source's span."""
+    return float(s.t[0] + 0.5 * (s.t[-1] - s.t[0]))
+
+
 def stepped(s: Series, size_m: float = 1.0) -> Series:
     """``size_m`` higher from half-way through the source's span."""
-    half = s.t[0] + 0.5 * (s.t[-1] - s.t[0])
-    return replace(s, value=s.value + np.where(s.t >= half, size_m, 0.0))
+    return replace(s, value=s.value + np.where(s.t >= _half_way(s), size_m, 0.0))
 
 
 def _stepped(s: Series, _rng: np.random.Generator, _: str) -> Series:
@@ -86,7 +90,7 @@ def _stepped(s: Series, _rng: np.random.Generator, _: str) -> Series:
 
 def _regained(s: Series, _rng: np.random.Generator, _: str) -> Series:
     """Lost for 10 s from half-way through the source's span, and 2 m higher once regained."""
-    half = s.t[0] + 0.5 * (s.t[-1] - s.t[0])
+    half = _half_way(s)
     keep = (s.t < half) | (s.t >= half + 10.0)  # its first and last samples: the same half-way
     return stepped(replace(s, t=s.t[keep], value=s.value[keep]), 2.0)
 
@@ -126,12 +130,9 @@ def _scaled(s: Series, _rng: np.random.Generator, percent: str) -> Series:
 
 def _flashed(s: Series, _rng: np.random.Generator, metres: str) -> Series:
     """``metres`` higher from half-way through the span, settling back (a 5 s time constant)."""
-    since = s.t - (s.t[0] + 0.5 * (s.t[-1] - s.t[0]))
-    return replace(
-        s,
-        value=s.value
-        + np.where(since >= 0.0, float(metres), 0.0) * np.exp(-np.maximum(since, 0.0) / 5.0),
-    )
+    since = s.t - _half_way(s)
+    settling = float(metres) * np.exp(-np.maximum(since, 0.0) / 5.0)
+    return replace(s, value=s.value + np.where(since >= 0.0, settling, 0.0))
 
 
 def _noisy(s: Series, rng: np.random.Generator, _: str) -> Series:

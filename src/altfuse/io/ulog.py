@@ -410,9 +410,10 @@ def _devices(
         f"vehicle_air_data: the barometer or its calibration changed {changes} "
         f"time{'s' if changes > 1 else ''} ({'; '.join(names)}): each read as its own barometer"
     )
+    masks = [inverse == u for u in order]
     return [
-        (f" ({name})", {c: v[inverse == u] for c, v in air.items()})
-        for u, name in zip(order, names, strict=True)
+        (f" ({name})", {c: v[mask] for c, v in air.items()})
+        for mask, name in zip(masks, names, strict=True)
     ]
 
 

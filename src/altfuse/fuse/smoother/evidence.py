@@ -141,12 +141,8 @@ def gps_evidence(
     trial = replace(ev, q_state=stable)
     models = [(ev, r, layout), (trial, r, layout)]
     if "baro" in kinds:
-        receivers = tuple(i for i, kind in enumerate(kinds) if kind == "gps")
-        models += [
-            (ev, r, layout.with_drift(kinds)),
-            (trial, r, layout.with_drift(kinds)),
-            (trial, r, replace(layout, drifting=receivers)),
-        ]
+        barometers, receivers = _drifting(layout, kinds)
+        models += [(ev, r, barometers), (trial, r, barometers), (trial, r, receivers)]
     default, richer, *drifted = likelihoods(*models)
     gain = stable_gain(default, richer, drifted)
     chosen, verdicts = (trial, richer) if gain > STABLE_GAIN else (ev, default)
@@ -171,9 +167,21 @@ def stable_gain(
     if not drifted:
         return gain
     wandering, barometers, receivers = (evidence_gain(default, d) for d in drifted)
-    best_wandering = wandering if wandering > DRIFT_GAIN else 0.0
-    told = barometers > gain + DRIFT_GAIN and barometers > receivers
-    return (barometers if told else gain) - best_wandering
+    best_wandering = wandering if _drift_kept(wandering) else 0.0
+    return (barometers if _drift_kept(barometers, receivers, gain) else gain) - best_wandering
+
+
+def _drift_kept(drift: float, rival: float = -math.inf, without: float = 0.0) -> bool:
+    """Whether the barometers' drift rates are kept, their model's log-likelihood gain
+    ``drift`` (over some pass) DRIFT_GAIN above the model without's (``without``, over the same
+    pass) and above the receivers' own drift's (``rival``; -inf: not offered)."""
+    return drift > without + DRIFT_GAIN and rival < drift
+
+
+def _drifting(layout: Layout, kinds: Sequence[str]) -> tuple[Layout, Layout]:
+    """``layout`` with a drift rate on each barometer's offset, and on each GPS receiver's."""
+    receivers = tuple(i for i, kind in enumerate(kinds) if kind == "gps")
+    return layout.with_drift(kinds), replace(layout, drifting=receivers)
 
 
 def scale_evidence(
@@ -308,23 +316,22 @@ def drift_evidence(
     the fused height 2 m above all three (the GPS's own: a gain of 214)."""
     if "baro" not in kinds:
         return layout, {}
-    drifting = layout.with_drift(kinds)
+    drifting, receivers = _drifting(layout, kinds)
     models = [(ev, r, drifting)]
-    receivers = tuple(i for i, kind in enumerate(kinds) if kind == "gps")
-    if receivers:
-        models.append((ev, r, replace(layout, drifting=receivers)))
+    if receivers.drifting:
+        models.append((ev, r, receivers))
     stable = _made_of(made, ev, layout)
     if stable is None:
         stable, *passes = likelihoods((ev, r, layout), *models)
     else:
         passes = likelihoods(*models)
     gain = evidence_gain(stable, passes[0])
-    rival = evidence_gain(stable, passes[1]) if receivers else -math.inf
-    modelled = gain > DRIFT_GAIN and rival < gain
+    rival = evidence_gain(stable, passes[1]) if receivers.drifting else -math.inf
+    modelled = _drift_kept(gain, rival)
     record = evidence_record("drift", modelled, gain)
     if math.isfinite(rival):
         record["gps_drift_loglik_gain"] = rival  # the rival's, never modelled itself
-    if gain > DRIFT_GAIN and not modelled:
+    if _drift_kept(gain) and not modelled:
         record["baro_drift"] = "not modelled (the GPS's own drift explains the log as well)"
     return (drifting if modelled else layout), record
 
