@@ -199,6 +199,27 @@ def test_a_sensor_stuck_while_the_others_move_is_dropped_and_counted() -> None:
     assert next(s for s in still.sensors if s.name == "gps2").dropped == {}
 
 
+def test_a_sensor_that_thaws_where_it_froze_is_at_rest_while_another_errs() -> None:
+    """A simulator's GPS reads one value to the bit while the copter hovers; its barometer
+    flashes 3 m high and settles back over 5 s (light on the sensor). The GPS thaws where it
+    froze, which a receiver frozen while the copter moved does not: it is at rest, the
+    barometer's excursion its own error. Before: 101 GPS samples dropped as stuck."""
+    t = np.arange(0.0, 60.0, 0.2)
+    height = np.interp(t, [0, 10, 20, 40, 50, 60], [0, 0, 10, 10, 20, 20])
+    gps = series("gps", t, np.round(500 + height, 2))  # a simulator's: no noise at rest
+    flash = np.where(t >= 27, 3.0 * np.exp(-(t - 27) / 5.0), 0.0)
+    rng = np.random.default_rng(3)
+    baro = series("baro", t, height + flash + rng.normal(0, 0.05, t.size))
+    out = {s.name: s for s in screen(_log(baro, gps)).sensors}
+    assert out["gps"].dropped == {}
+    assert out["gps"].t.size == t.size
+    # a receiver frozen through the second climb thaws 10 m away: stuck, as before
+    frozen = gps.value.copy()
+    frozen[(t >= 38) & (t < 48)] = frozen[t >= 38][0]
+    out = {s.name: s for s in screen(_log(baro, replace(gps, value=frozen))).sensors}
+    assert out["gps"].dropped == {STUCK: int(((t >= 20) & (t < 48)).sum())}
+
+
 def test_the_stuck_gps2_of_a_real_log_is_dropped_and_the_fusion_stays_with_the_others() -> None:
     """diaven_sample01: GPS2 reports 0.00 m with a 3D fix for 68 s, then 43 m. Support weighs
     every valid sensor at every tick: its fused value shows the datum the stuck samples gave."""

@@ -33,6 +33,7 @@ from altfuse.pipeline import (
     run_method,
     step_record,
 )
+from altfuse.screen import STUCK
 from conftest import SHARED_LOGS, shared_log
 from repeated import cut_log
 from variants import variant
@@ -391,15 +392,21 @@ def test_a_wind_the_air_did_not_blow_loses_to_the_ground_speed(wind: Wind) -> No
 
 def test_two_barometers_stepped_in_the_gps_s_gap_are_the_ones_that_jumped() -> None:
     """The 137 m flight's two barometers 1 m higher from 66.27 s (``step-baro``), while its GPS
-    is lost from 62 to 75 s: the steps are found across the gap, at its middle (69.05 s), and
-    lie anywhere in it. The barometers' jump is tried where their own heights step (66.25 s),
-    the GPS's in its gap: the log takes the barometers', their samples after it moved back.
+    is lost from 62.8 to 75.6 s: the steps are found across the gap, at its middle (69.05 s),
+    and lie anywhere in it. The barometers' jump is tried where their own heights step (66.25
+    s), the GPS's in its gap: the log takes the barometers', their samples after it moved back.
     Their jump tried at the gap's middle could not explain their step at 66.27 s, the GPS's
-    could, and the height followed them: 0.663 m RMSE against the GPS's 0.005 (now 0.004)."""
+    could, and the height followed them: 0.663 m RMSE against the GPS's 0.005 (now 0.004).
+    (The gap is cut here: the screening had dropped those samples of the simulator's GPS, one
+    value while the copter hovered, as stuck while the barometers stepped.)"""
+    flight = variant(read_log(shared_log("truth/copter_4.4.4_wlichon_home137m_rfndzero.BIN")),
+                     "step-baro")  # fmt: skip
+    gps = next(s for s in flight.sensors if s.kind == "gps")
+    kept = (gps.t < 62.7) | (gps.t > 75.6)  # its 65 samples from 62.79 to 75.59 s
+    lost = replace(gps, t=gps.t[kept], value=gps.value[kept])
+    sensors = tuple(lost if s is gps else s for s in flight.sensors)
     evaluation = evaluate_prepared(
-        changed("copter_4.4.4_wlichon_home137m_rfndzero.BIN", "step-baro"),
-        ["smoother"],
-        truth="sim",
+        prepare(replace(flight, sensors=sensors), FuseOptions()), ["smoother"], truth="sim"
     )
     steps = evaluation.prepared.referred.steps
     assert [(s.first, s.second) for s in steps] == [("gps", "baro"), ("gps", "baro2")]
@@ -541,6 +548,29 @@ def test_a_barometer_s_flash_is_no_drift_of_a_stable_gps_s_barometer() -> None:
     result = verdict(evaluation, "smoother")
     assert isinstance(result["rmse"], float)
     assert result["rmse"] < 0.1, result
+
+
+@pytest.mark.parametrize(
+    ("name", "how", "rmse"),
+    [
+        ("copter_4.0.4rc2_leaerialtech_hexa_10m.BIN", "flash-10", 0.03),
+        ("copter_4.4.4_wlichon_home137m_rfndzero.BIN", "step-baro", 0.01),
+    ],
+)
+def test_a_simulator_s_gps_at_rest_is_kept_beside_a_barometer_s_excursion(
+    name: str, how: str, rmse: float
+) -> None:
+    """The simulators' GPS reads one value to the bit while their copters hover. Beside the
+    hexa's barometer flashed 10 m (settling back over 15 s), and the 137 m flight's two
+    stepped 1 m, it was dropped as stuck (50 and 65 samples): the hexa's height then followed
+    its barometer alone, 4.35 m RMSE, 6.9 m at most. It thaws where it froze: kept (0.011 and
+    0.004 m)."""
+    prepared = changed(name, how)
+    gps = next(s for s in prepared.log.sensors if s.kind == "gps")
+    assert STUCK not in gps.dropped
+    result = verdict(evaluate_prepared(prepared, ["smoother"], truth="sim"), "smoother")
+    assert isinstance(result["rmse"], float)
+    assert result["rmse"] < rmse, result
 
 
 def test_a_plane_s_barometer_scale_makes_no_step_where_its_dive_ends() -> None:
