@@ -25,7 +25,7 @@ from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import NIS_CHECK, SmootherParams, fuse_smoother, model_check
 from altfuse.fuse.smoother.compiled import _forget_other_versions
 from altfuse.fuse.smoother.events import _triangle_sums
-from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record
+from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record, stable_gain
 from altfuse.fuse.smoother.model import (
     GPS_CORRELATION_S,
     LEARN_SCALE_STD,
@@ -207,6 +207,24 @@ def test_a_drifting_barometer_gets_a_drift_rate(
     else:
         assert params["baro_drift"].startswith("not modelled")
         assert params.get("baro_drift_loglik_gain", -1.0) < DRIFT_GAIN
+
+
+@pytest.mark.parametrize(("receivers", "gain"), [(50.0, 109.0), (150.0, -577.0)])
+def test_the_stable_gps_wins_by_the_barometers_drift_only_where_it_beats_the_gps_s_own(
+    receivers: float, gain: float
+) -> None:
+    """The stable GPS's gain over the wandering one (:func:`stable_gain`): with the barometers'
+    drift where that gains DRIFT_GAIN and more than its receivers' own drift (as the drift
+    test keeps it), else without. The passes' log-likelihoods, one sample each: the stable GPS
+    -577 alone, 109 with the barometers' drift, ``receivers`` with the GPS's own (a 305 m
+    climb's barometer flashed 3 m: the stable GPS won by a drift the drift test left out)."""
+
+    def made(loglik: float) -> dict[str, np.ndarray]:
+        return {"accepted": np.array([True]), "loglik": np.array([loglik])}
+
+    drifted = [made(DRIFT_GAIN / 2), made(109.0), made(receivers)]
+    assert stable_gain(made(0.0), made(-577.0), drifted) == gain
+    assert stable_gain(made(0.0), made(-577.0)) == -577.0
 
 
 def test_a_gps_that_ramps_away_from_two_barometers_is_not_followed_by_their_drift() -> None:
@@ -430,7 +448,7 @@ def _stepped(which: int) -> tuple[FusionInput, np.ndarray, np.ndarray]:
     z[t >= 70.0, which] += 1.0
     inputs = FusionInput.from_heights(z, dt, kinds=("gps", "baro"), accel_up=a)
     (step,) = find_steps(t, z, inputs.names, inputs.kinds)
-    jump = (step.time_s, (0, 1), step.size_m, step.half_width_s)
+    jump = (step.time_s, (0, 1), step.size_m, step.half_width_s, step.settle_m)
     return replace(inputs, on_ground_s=((0.0, 18.0),), steps=(jump,)), h, t
 
 
@@ -478,7 +496,8 @@ def test_a_gps_s_step_against_two_barometers_is_one_jump_of_the_gps(
     steps = find_steps(t, z, inputs.names, inputs.kinds)
     assert [(s.second, s.time_s) for s in steps] == found
     jumps = tuple(
-        (s.time_s, (0, inputs.names.index(s.second)), s.size_m, s.half_width_s) for s in steps
+        (s.time_s, (0, inputs.names.index(s.second)), s.size_m, s.half_width_s, s.settle_m)
+        for s in steps
     )
     res = fuse_smoother(replace(inputs, on_ground_s=((0.0, 18.0),), steps=jumps), SmootherParams())
     when, size, sensor = re.fullmatch(r"(\S+) s: (\S+) m, (\w+)", str(res.params["steps"])).groups()
@@ -513,7 +532,7 @@ def test_a_sensor_regained_elsewhere_is_its_jump_where_the_likelihood_says_so() 
     inputs, h, t = _regained(6, 2.0)
     (step,) = find_steps(t, inputs.z, inputs.names, inputs.kinds)
     assert step.tentative
-    jump = (step.time_s, (0, 1), step.size_m, step.half_width_s)
+    jump = (step.time_s, (0, 1), step.size_m, step.half_width_s, step.settle_m)
     res = fuse_smoother(replace(inputs, tentative=(jump,)), SmootherParams())
     when, size, sensor = re.fullmatch(r"(\S+) s: (\S+) m, (\w+)", str(res.params["steps"])).groups()
     assert (float(when), sensor) == (64.95, "baro")
@@ -521,7 +540,7 @@ def test_a_sensor_regained_elsewhere_is_its_jump_where_the_likelihood_says_so() 
     after = t >= 70.0
     assert np.sqrt(np.mean((res.fused[after] - h[after]) ** 2)) < 0.05
     inputs, h, t = _regained(0, 0.0)
-    made_up = replace(inputs, tentative=((64.95, (0, 1), 2.0, 5.0),))
+    made_up = replace(inputs, tentative=((64.95, (0, 1), 2.0, 5.0, 0.0),))
     res = fuse_smoother(made_up, SmootherParams())
     assert res.params["steps"] == ""
     np.testing.assert_array_equal(res.fused, fuse_smoother(inputs, SmootherParams()).fused)

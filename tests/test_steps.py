@@ -12,6 +12,7 @@ from altfuse.steps import (
     REGAIN_SIGMAS,
     STEP_GAP_S,
     STEP_MIN_M,
+    STEP_SETTLE_S,
     STEP_SIGMAS,
     _end_error,
     _line_ends,
@@ -93,6 +94,59 @@ def test_a_rangefinder_s_ground_is_not_a_step_nor_one_under_half_a_metre() -> No
     small = z.copy()
     small[t >= 100.0, 1] += 0.9 * STEP_MIN_M
     assert find_steps(t, small, ("gps", "baro"), KINDS) == ()
+
+
+@pytest.mark.parametrize(("which", "size"), [(0, 1.0), (1, -0.8), (1, 10.0)])
+def test_the_sensor_whose_own_heights_jump_is_the_one_that_jumped(which: int, size: float) -> None:
+    """Its own lines either side of the step part by it, the other's hold: that one jumped
+    (:attr:`altfuse.steps.Step.jumped`), for the fusion method to take as given. Where the
+    vehicle's own motion parts both by more than a quarter of the step (a descent begun at 3
+    m/s^2 from rest: 1 m between lines over 2 s), or the step lies in a gap, the heights do
+    not tell."""
+    t, _, z = two_sensors()
+    stepped = z.copy()
+    stepped[t >= 100.0, which] += size
+    (step,) = find_steps(t, stepped, ("gps", "baro"), KINDS)
+    assert step.jumped == ("gps", "baro")[which]
+    assert step_record(step)["jumped"] == step.jumped
+    jerk = z - np.where(t >= 100.0, 1.5 * (t - 100.0) ** 2, 0.0)[:, None]
+    jerk[t >= 100.0, which] += size
+    (step,) = find_steps(t, jerk, ("gps", "baro"), KINDS)
+    assert step.size_m == pytest.approx(size if which == 1 else -size, abs=0.05)
+    assert step.jumped == (None if abs(size) < 4.0 else ("gps", "baro")[which])
+    lost = stepped.copy()
+    lost[(t >= 95.0) & (t < 105.0), 1 - which] = np.nan
+    (step,) = find_steps(t, lost, ("gps", "baro"), KINDS)
+    assert step.half_width_s > 4.0
+    assert step.jumped is None
+
+
+def test_a_step_settles_as_far_as_the_difference_moves_back_after_it() -> None:
+    """A barometer flashed 3 m at 100 s, settling back with a time constant of 5 s: it settles
+    by the difference's move back over STEP_SETTLE_S (2.4 m, from its mean over the first 2
+    s). A step that holds, or one the difference goes on from (a crash's last seconds part two
+    sensors further), settles by none; lost before the span ends, by the whole step (it may
+    settle unseen)."""
+    t, _, z = two_sensors()
+    after = t >= 100.0
+    flashed = z.copy()
+    flashed[after, 1] += 3.0 * np.exp(-(t[after] - 100.0) / 5.0)
+    (step,) = find_steps(t, flashed, ("gps", "baro"), KINDS)
+    # its means over the first 2 s after the step and over the last 2 s of the span
+    first, last = (3.0 * np.exp(-np.arange(a, a + 2.0, 0.1) / 5.0).mean() for a in (0.0, 18.0))
+    assert STEP_SETTLE_S == 20.0
+    assert step.settle_m == pytest.approx(last - first, abs=0.1)
+    assert step_record(step)["settle_m"] == round(step.settle_m, 3)
+    held = z.copy()
+    held[after, 1] += 3.0
+    assert find_steps(t, held, ("gps", "baro"), KINDS)[0].settle_m == 0.0
+    further = held.copy()
+    further[after, 1] += np.clip(t[after] - 105.0, 0.0, 3.0)
+    assert find_steps(t, further, ("gps", "baro"), KINDS)[0].settle_m == 0.0
+    lost = flashed.copy()
+    lost[t >= 110.0, 0] = np.nan
+    (step,) = find_steps(t, lost, ("gps", "baro"), KINDS)
+    assert step.settle_m == pytest.approx(-step.size_m)
 
 
 def test_a_step_across_a_gap_is_found_in_its_middle_and_a_long_gap_is_not_bridged() -> None:

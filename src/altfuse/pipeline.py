@@ -312,17 +312,24 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
 
 def _jumps(referred: Referred, *, tentative: bool) -> tuple[Jump, ...]:
     """The ``referred`` steps (:attr:`altfuse.steps.Step.tentative` or not) as a fusion method
-    takes them: between the sensors of ``referred.names`` by their indices."""
+    takes them: between the sensors of ``referred.names`` by their indices, or the one whose
+    own heights jumped (:attr:`altfuse.steps.Step.jumped`) and its own jump."""
+    names = referred.names
     return tuple(
-        (
-            s.time_s,
-            (referred.names.index(s.first), referred.names.index(s.second)),
-            s.size_m,
-            s.half_width_s,
-        )
+        _jump(s, names)
         for s in referred.steps
-        if s.tentative == tentative and s.first in referred.names and s.second in referred.names
+        if s.tentative == tentative and s.first in names and s.second in names
     )
+
+
+def _jump(step: Step, names: tuple[str, ...]) -> Jump:
+    """``step`` as a fusion method takes it (:func:`_jumps`)."""
+    if step.jumped is None:
+        pair = (names.index(step.first), names.index(step.second))
+        return step.time_s, pair, step.size_m, step.half_width_s, step.settle_m
+    sign = 1.0 if step.jumped == step.second else -1.0
+    jumped = (names.index(step.jumped),)
+    return step.time_s, jumped, sign * step.size_m, step.half_width_s, sign * step.settle_m
 
 
 def run_method(
@@ -432,6 +439,10 @@ def step_record(step: Step) -> dict[str, Any]:
         "half_width_s": round(step.half_width_s, 3),
         # found only so, under 10 sigma: a jump only where a method's evidence says so
         "tentative": step.tentative,
+        # the sensor whose own heights jumped by it while the other's held (else null)
+        "jumped": step.jumped,
+        # how far the difference moved over the 20 s after it, where that stood out (else 0)
+        "settle_m": round(step.settle_m, 3),
     }
 
 

@@ -79,6 +79,16 @@ STEP_GAP_S = 20.0
 #: At most this many steps between two sensors (a log whose sensors disagree everywhere has
 #: no steps to speak of).
 STEP_MOST = 20
+#: A step at a known instant is the sensor's whose own heights part there by at least
+#: OWN_JUMPED of it, the other's by at most OWN_HELD (:func:`_jumped`).
+OWN_JUMPED = 0.5
+OWN_HELD = 0.25
+#: A step's settling: how far the difference moves over this span [s] after it (its means over
+#: STEP_WINDOWS_S[0] at either end), where that is SETTLE_SIGMAS times the difference's own
+#: moves over the span anywhere in the flight (:func:`_settling`).
+STEP_SETTLE_S = 20.0
+SETTLE_SIGMAS = 3.0
+SETTLE_SHARE = 0.5
 
 
 #: A step as :func:`_steps` finds it: time [s], size [m], significance [sigma], half its gap [s].
@@ -97,6 +107,8 @@ class Step:
     size_m: float
     sigmas: float
     half_width_s: float = 0.0
+    jumped: str | None = None  # the sensor whose own heights jumped, where they tell
+    settle_m: float = 0.0  # the difference's move over STEP_SETTLE_S after it, where it stands out
 
     @property
     def tentative(self) -> bool:
@@ -110,12 +122,109 @@ def find_steps(
     """Every step between two of the GPS and barometer heights ``h`` (ticks ``t``, one column
     per sensor), by time."""
     steady = [i for i, kind in enumerate(kinds) if kind != "rangefinder"]
-    found = [
-        Step(time, names[i], names[j], size, sigmas, half)
-        for i, j in itertools.combinations(steady, 2)
-        for time, size, sigmas, half in _steps(t, h[:, j] - h[:, i], _either(h[:, i], h[:, j]))
-    ]
+    found: list[Step] = []
+    for i, j in itertools.combinations(steady, 2):
+        d = h[:, j] - h[:, i]
+        pair = _steps(t, d, _either(h[:, i], h[:, j]))
+        found += [
+            Step(time, names[i], names[j], size, sigmas, half,
+                 _jumped(t, h, (i, j), names, time, size), settle)
+            for (time, size, sigmas, half), settle in zip(pair, _settling(t, d, pair), strict=True)
+        ]  # fmt: skip
     return tuple(sorted(found, key=lambda s: s.time_s))
+
+
+def _settling(t: FloatArray, d: FloatArray, found: Sequence[_Found]) -> list[float]:
+    """How far the difference ``d`` of two sensors' heights moves back over STEP_SETTLE_S after
+    each of its steps ``found`` (by time; up to the next one, or the log's end): its mean over
+    the last STEP_WINDOWS_S[0] less its mean over the first, where that undoes at least
+    SETTLE_SHARE of the step (at most all of it) and is SETTLE_SIGMAS times the difference's
+    own moves over the span away from the steps (1.4826 MAD of its means that far apart); else
+    0 (a crash's last seconds part two sensors further). Where a sensor is lost before the
+    span or the log ends, the whole step back: it may settle unseen. A
+    barometer flashed by light jumps and settles back over 15 s; a GPS's new fix holds, and a
+    GPS's wander moves the difference as much everywhere.
+
+    Its offset let settle as far (:func:`altfuse.fuse.smoother.noise.with_jumps`), the
+    smoother follows the other sensor while it does: a barometer's flash of 1-10 m, its jump
+    moved out of its samples, had left them as far below once settled back, and the height
+    followed them or the gate shut them out for the rest of the flight (the 8 m flight's 3 m
+    flash: 1.64 m RMSE where its GPS's is 0.01). Settling by the whole step after every jump
+    let a barometer stepped 1 m settle along a GPS's wander instead (0.29 m off, where 0.03)."""
+    if not found or t.size < 2:
+        return [0.0] * len(found)
+    n = _ticks(STEP_WINDOWS_S[0], float(t[1] - t[0]))
+    valid = np.isfinite(d)
+    sums = np.convolve(np.where(valid, d, 0.0), np.ones(n), "valid")
+    full = np.convolve(valid.astype(np.float64), np.ones(n), "valid") == n
+    means = np.where(full, sums / n, np.nan)  # over ticks k .. k + n - 1
+    wander = _quiet_wander(t, means, found, n)
+    ends = [time - half for time, _, _, half in found[1:]] + [math.inf]
+    out = []
+    for (time, size, _, half), end in zip(found, ends, strict=True):
+        first = int(np.searchsorted(t, time + half))
+        stop = int(np.searchsorted(t, min(time + half + STEP_SETTLE_S, end))) - n
+        last = min(stop, means.size - 1)
+        if last < first + n:  # the next step, or the log's end, comes first
+            out.append(0.0)
+            continue
+        seen = np.flatnonzero(np.isfinite(means[first + n : last + 1])) + first + n
+        if not (np.isfinite(means[first]) and seen.size and seen[-1] >= last - n):
+            out.append(-size)  # a sensor lost meanwhile
+            continue
+        move = float(means[seen[-1]] - means[first])
+        back = -move * np.sign(size)  # towards the level before the step
+        settles = back >= SETTLE_SHARE * abs(size) and back > SETTLE_SIGMAS * wander
+        out.append(float(np.clip(move, -abs(size), abs(size))) if settles else 0.0)
+    return out
+
+
+def _quiet_wander(t: FloatArray, means: FloatArray, found: Sequence[_Found], n: int) -> float:
+    """The spread (1.4826 MAD) of the difference's moves over STEP_SETTLE_S (its ``means``
+    over ``n`` ticks that far apart) away from the steps ``found`` and their settling; 0 where
+    fewer than ten are left."""
+    span = round(STEP_SETTLE_S / float(t[1] - t[0]))
+    if means.size <= span:
+        return 0.0
+    moves = means[span:] - means[:-span]
+    near = np.zeros(t.size, dtype=bool)
+    for time, _, _, half in found:
+        near[(t >= time - half) & (t <= time + half + STEP_SETTLE_S)] = True
+    across = np.convolve(near, np.ones(span + n), "valid")[: moves.size] > 0
+    moves = moves[np.isfinite(moves) & ~across]
+    if moves.size < 10:
+        return 0.0
+    return MAD_TO_SIGMA * float(np.median(np.abs(moves - np.median(moves))))
+
+
+def _jumped(
+    t: FloatArray,
+    h: FloatArray,
+    pair: tuple[int, int],
+    names: Sequence[str],
+    time: float,
+    size: float,
+) -> str | None:
+    """Which of the ``pair`` of sensors (columns of ``h``, the first and the second) jumped by
+    the step ``size`` between them (the second's heights against the first's) at ``time``, as
+    their own heights tell: the lines over STEP_WINDOWS_S[0] either side of the instant part by at
+    least OWN_JUMPED of it on the one, by at most OWN_HELD on the other. None where they do not
+    tell, or the step lies in a gap (it has no instant): the vehicle's own motion parts both
+    alike, and a jerk there (3 m/s^2 from rest: 1 m between lines over 2 s) leaves the step
+    to the fusion method's evidence.
+
+    A barometer flashed 10 m beside a simulator's GPS parts its own lines by 9.6 m, the GPS's
+    by 3 mm; tried as either's jump, the smoother's evidence (the barometer's settling back
+    rejected alike in both readings) gave it to the GPS, and the fused height ran 1.9 m off
+    both over the next two minutes."""
+    n = _ticks(STEP_WINDOWS_S[0], float(t[1] - t[0]))
+    k = int(np.searchsorted(t, time))
+    i, j = pair
+    first, second = _step_at(h[:, i], k, n, 0), _step_at(h[:, j], k, n, 0)
+    for own, other, jump, who in ((second, first, size, j), (first, second, -size, i)):
+        if own * jump >= OWN_JUMPED * jump**2 and abs(other) <= OWN_HELD * abs(jump):
+            return names[who]
+    return None
 
 
 def _either(a: FloatArray, b: FloatArray) -> npt.NDArray[np.bool_]:

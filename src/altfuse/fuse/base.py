@@ -29,10 +29,11 @@ DIVERGED: Final[Status] = "diverged"  # the value left every valid sensor (altfu
 LogInput = Literal["accel"]
 
 
-#: A step between sensors: its time [s], the sensors that may have jumped, the jump [m], and
-#: how far from that time the jump may lie [s] (found across a gap of one sensor's: half the
-#: gap; the smoother narrows it, :func:`altfuse.fuse.smoother.noise.with_jumps`).
-Jump = tuple[float, tuple[int, ...], float, float]
+#: A step between sensors: its time [s], the sensors that may have jumped, the jump [m], how
+#: far from that time the jump may lie [s] (found across a gap of one sensor's: half the gap;
+#: the smoother narrows it, :func:`altfuse.fuse.smoother.noise.with_jumps`), and how far it
+#: settles after it [m] (:attr:`altfuse.steps.Step.settle_m`).
+Jump = tuple[float, tuple[int, ...], float, float, float]
 
 
 @dataclass(frozen=True)

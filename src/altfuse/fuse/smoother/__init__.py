@@ -203,18 +203,23 @@ lost with it (0.73 m RMSE against 0.17 m at 3.5 sigma).
 Steps: where two sensors' heights jump against each other (:mod:`altfuse.steps`, found on the
 clock before referral), neither a random walk nor the gate takes it: the smoother followed a
 barometer stepped 1 m beside a GPS it holds to wander (the simulators' hexacopter: 1.06 m RMSE
-against the GPS's 0.008), or gated a stepped GPS out for the rest of the flight. Each step (or
-the steps at one instant, as one event) is tried as either sensor's jump
-(:func:`.evidence.jump_evidence`: the accelerometer holds the height through it, and any third
-sensor); the one whose samples are the likelier is taken, its samples after the step moved back
-by it and its offset let jump (``JUMP_SIGMAS`` times the step over ``JUMP_HALF_WIDTH_S``);
-where neither is, both offsets may jump. A tentative step (a sensor regained elsewhere, found
-below the sure steps' significance: :attr:`altfuse.steps.Step.tentative`) is tried as no jump
-as well, and made one only where the likelihood says so (:func:`.evidence.regain_evidence`).
-Recorded as ``steps`` (time, the jump, whose). On the
-truth logs with one sensor stepped 1 m half-way, within the bar on 10 and 13 of 13 (barometer,
-GPS) where it was 7 and 12; lost for 10 s and regained 2 m higher, 13 and 13 where it was 6
-and 11; the logs without a step unchanged.
+against the GPS's 0.008), or gated a stepped GPS out for the rest of the flight. A step whose
+sensor its own heights tell (:attr:`altfuse.steps.Step.jumped`: they jump there, the other's
+hold) is that sensor's; each other step (or the steps at one instant, as one event) is tried as
+either sensor's jump (:func:`.evidence.jump_evidence`: the accelerometer holds the height
+through it, and any third sensor); the one whose samples are the likelier is taken, its samples
+after the step moved back by it and its offset let jump (``JUMP_SIGMAS`` times the step over
+``JUMP_HALF_WIDTH_S``) and settle (as far as the two sensors' difference moves back over the
+next 20 s, :attr:`altfuse.steps.Step.settle_m`: a barometer flashed by light settles back);
+where neither is, both offsets may jump. A
+tentative step (a sensor regained elsewhere, found below the sure steps' significance:
+:attr:`altfuse.steps.Step.tentative`) is tried as no jump as well, and made one only where the
+likelihood says so (:func:`.evidence.regain_evidence`). Recorded as ``steps`` (time, the jump,
+whose). On the truth logs with one sensor stepped 1 m half-way, within the bar on 12 and 13
+of 13 (barometer, GPS) where it was 7 and 12; lost for 10 s and regained 2 m higher, 13 and 13
+where it was 6 and 11; flashed 1, 3, -3 and 10 m (settling back over 15 s), 10, 9, 10 and 4
+where 6, 5, 6 and 2 before the jumps settled and their sensors were told by their own heights;
+the logs without a step unchanged.
 
 Outputs: the smoothed height at the clock's ticks, its standard deviation (``fused_std``: the
 model's, and the sensors' common latency behind the log's timestamps, ``TIMING_SIGMA_S``, times
@@ -534,7 +539,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             # heights less the GPS's jumped x, either may have)
             "steps": "; ".join(
                 f"{time:.2f} s: {size:+.2f} m, {' or '.join(names[i] for i in sensors)}"
-                for time, sensors, size, _ in steps
+                for time, sensors, size, *_ in steps
             ),
         },
     )
@@ -695,7 +700,7 @@ def _jumps(
     steps = jump_evidence(ev, (r, layout), inputs.steps, windowed) if inputs.steps else ()
     steps = _once(steps + regain_evidence(ev, (r, layout), steps, inputs.tentative, windowed))
     z = ev.z.copy()
-    for time, sensors, size, _ in steps:
+    for time, sensors, size, *_ in steps:
         if len(sensors) == 1:
             z[(ev.who == sensors[0]) & (ev.t > time)] -= size
     return steps, replace(ev, z=z, q_state=with_jumps(ev.q_state, steps, ev.t))
@@ -717,7 +722,16 @@ def _once(jumps: Sequence[Jump]) -> tuple[Jump, ...]:
             same[-1].append(jump)
         else:
             groups.append([jump])
-    return tuple((g[0][0], g[0][1], float(np.mean([j[2] for j in g])), g[0][3]) for g in groups)
+    return tuple(
+        (
+            g[0][0],
+            g[0][1],
+            float(np.mean([j[2] for j in g])),
+            g[0][3],
+            float(np.mean([j[4] for j in g])),
+        )
+        for g in groups
+    )
 
 
 def _windowed(inputs: FusionInput, jump: Jump) -> Jump:
@@ -730,12 +744,12 @@ def _windowed(inputs: FusionInput, jump: Jump) -> Jump:
     gap's middle could not explain their step, the GPS's jump unseen in its gap could, and
     they were followed, 0.663 m RMSE (0.004 with their jump at their step; the GPS's 0.005).
     """
-    time, sensors, size, half = jump
+    time, sensors, size, half, settle = jump
     if len(sensors) == 1 and half > JUMP_HALF_WIDTH_S:
         instant = jump_instant(inputs.t, inputs.z[:, sensors[0]], (time - half, time + half))
         if instant is not None:
-            return instant, sensors, size, inputs.dt_s
-    return time, sensors, size, JUMP_HALF_WIDTH_S
+            return instant, sensors, size, inputs.dt_s, settle
+    return time, sensors, size, JUMP_HALF_WIDTH_S, settle
 
 
 def _gps_stability(

@@ -433,7 +433,7 @@ def _jumping(
     """The model of ``ev`` with its offsets let jump at ``jumps`` (:func:`.noise.with_jumps`),
     as :func:`.passes.likelihoods` takes it (``model``: the variances and the layout)."""
     r, layout = model
-    return replace(ev, q_state=with_jumps(ev.q_state, jumps, ev.t)), r, layout
+    return replace(ev, q_state=with_jumps(ev.q_state, jumps, ev.t, settling=False)), r, layout
 
 
 def _reading(
@@ -495,7 +495,11 @@ def _options(event: Sequence[Jump]) -> list[list[Jump]]:
         return [[_own(event[0], pairs[0][0])], [_own(event[0], pairs[0][1])]]
     (one,) = set.intersection(*(set(p) for p in pairs))  # one shared (:func:`_together`)
     jumps = [_own(step, one)[2] for step in event]
-    common: Jump = (event[0][0], (one,), float(np.mean(jumps)), max(s[3] for s in event))
+    settles = [_own(step, one)[4] for step in event]
+    common: Jump = (
+        event[0][0], (one,), float(np.mean(jumps)), max(s[3] for s in event),
+        float(np.mean(settles)),
+    )  # fmt: skip
     return [[common], [_own(step, next(s for s in step[1] if s != one)) for step in event]]
 
 
@@ -520,5 +524,6 @@ def _together(steps: Sequence[Jump]) -> list[list[int]]:
 def _own(step: Jump, sensor: int) -> Jump:
     """``step`` (between two sensors, the second's jump against the first's) as ``sensor``'s
     own jump."""
-    time, sensors, size, half = step
-    return (time, (sensor,), size if sensor == sensors[1] else -size, half)
+    time, sensors, size, half, settle = step
+    sign = 1.0 if sensor == sensors[1] else -1.0
+    return (time, (sensor,), sign * size, half, sign * settle)
