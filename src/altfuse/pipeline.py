@@ -441,7 +441,7 @@ def step_record(step: Step) -> dict[str, Any]:
         "tentative": step.tentative,
         # the sensor whose own heights jumped by it while the other's held (else null)
         "jumped": step.jumped,
-        # how far the difference moved over the 20 s after it, where that stood out (else 0)
+        # how far the difference moved back over the 20 s after it, where that stood out
         "settle_m": round(step.settle_m, 3),
     }
 

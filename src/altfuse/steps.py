@@ -49,6 +49,11 @@ across a
 pause of the log (both lost): a real flight logged 18 times over, its crash's last seconds
 and the next copy's start read as 17 steps of 3.6 m, and the smoother took them for the GPS's
 jumps, 25,446 ticks diverged.
+
+Each step also tells, where it can, which sensor jumped (:attr:`Step.jumped`: its own heights
+part at the instant, the other's hold, :func:`_jumped`) and how far the two settle back over
+the next STEP_SETTLE_S (:attr:`Step.settle_m`, :func:`_settling`: a barometer flashed by light
+jumps and settles back over 15 s).
 """
 
 from __future__ import annotations
@@ -83,9 +88,10 @@ STEP_MOST = 20
 #: OWN_JUMPED of it, the other's by at most OWN_HELD (:func:`_jumped`).
 OWN_JUMPED = 0.5
 OWN_HELD = 0.25
-#: A step's settling: how far the difference moves over this span [s] after it (its means over
-#: STEP_WINDOWS_S[0] at either end), where that is SETTLE_SIGMAS times the difference's own
-#: moves over the span anywhere in the flight (:func:`_settling`).
+#: A step's settling: how far the difference moves back over this span [s] after it (its means
+#: over STEP_WINDOWS_S[0] at either end), where that is at least SETTLE_SHARE of the step and
+#: SETTLE_SIGMAS times the difference's own moves over the span away from steps
+#: (:func:`_settling`).
 STEP_SETTLE_S = 20.0
 SETTLE_SIGMAS = 3.0
 SETTLE_SHARE = 0.5
@@ -108,7 +114,7 @@ class Step:
     sigmas: float
     half_width_s: float = 0.0
     jumped: str | None = None  # the sensor whose own heights jumped, where they tell
-    settle_m: float = 0.0  # the difference's move over STEP_SETTLE_S after it, where it stands out
+    settle_m: float = 0.0  # the difference's move back over STEP_SETTLE_S, where it stands out
 
     @property
     def tentative(self) -> bool:
@@ -141,9 +147,9 @@ def _settling(t: FloatArray, d: FloatArray, found: Sequence[_Found]) -> list[flo
     SETTLE_SHARE of the step (at most all of it) and is SETTLE_SIGMAS times the difference's
     own moves over the span away from the steps (1.4826 MAD of its means that far apart); else
     0 (a crash's last seconds part two sensors further). Where a sensor is lost before the
-    span or the log ends, the whole step back: it may settle unseen. A
-    barometer flashed by light jumps and settles back over 15 s; a GPS's new fix holds, and a
-    GPS's wander moves the difference as much everywhere.
+    span or the log ends, the whole step back: it may settle unseen. A barometer flashed by
+    light jumps and settles back over 15 s; a GPS's new fix holds, and a GPS's wander moves
+    the difference as much everywhere.
 
     Its offset let settle as far (:func:`altfuse.fuse.smoother.noise.with_jumps`), the
     smoother follows the other sensor while it does: a barometer's flash of 1-10 m, its jump
@@ -163,8 +169,9 @@ def _settling(t: FloatArray, d: FloatArray, found: Sequence[_Found]) -> list[flo
     out = []
     for (time, size, _, half), end in zip(found, ends, strict=True):
         first = int(np.searchsorted(t, time + half))
-        stop = int(np.searchsorted(t, min(time + half + STEP_SETTLE_S, end))) - n
-        last = min(stop, means.size - 1)
+        last = min(
+            int(np.searchsorted(t, min(time + half + STEP_SETTLE_S, end))) - n, means.size - 1
+        )
         if last < first + n:  # the next step, or the log's end, comes first
             out.append(0.0)
             continue
