@@ -53,7 +53,7 @@ from altfuse.errors import NoUsableSensorsError
 from altfuse.inertial import G
 from altfuse.metrics import MAD_TO_SIGMA, running_median, runs
 from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Samples, SensorKind, Series
-from altfuse.steps import STEP_WINDOWS_S, Step, find_steps
+from altfuse.steps import STEP_SETTLE_S, STEP_WINDOWS_S, Step, find_steps
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
 MIN_WINDOW_TICKS = 3
@@ -906,9 +906,10 @@ def baro_scales(
     0.017 and 0.016 m). The 9 m one's without GPS, 1.083 +- 0.033 (one 6 s climb among its 10 s
     spans), is not applied. With the simulators' own GPS, the GPS's fit is the better on all.
 
-    ``h`` holds the sources referred by offsets only. Over the ticks where both are valid,
-    ``h_baro = scale * h_gps + drift * t + b`` by least squares, twice more without those beyond
-    3 sigma (a glitch), with a drift in time (a barometer warming: a drift is not a scale)
+    ``h`` holds the sources referred by offsets only. Over the ticks where both are valid (but
+    the 20 s after a step that settles back, :func:`_unsettled`), ``h_baro = scale * h_gps +
+    drift * t + b`` by least squares, twice more without those beyond 3 sigma (a glitch), with
+    a drift in time (a barometer warming: a drift is not a scale)
     and a constant ``b`` (a datum matched in flight); and ``+ k |V - W|^2 / 2g`` where the
     GPS's ground velocity (``track``) tells ``k`` from 0 (:func:`dynamic_head`, DYNAMIC_SIGMAS:
     fast stretches flown high read as a scale otherwise), ``W`` the wind where the log has the
@@ -939,7 +940,7 @@ def baro_scales(
             (
                 _scale(
                     aligned.t,
-                    (h[:, j], h[:, i]),
+                    (h[:, j], _unsettled(aligned.t, h[:, i], steps, (names[i], names[j]))),
                     names[j],
                     _between(steps, names[i], names[j]),
                     air,
@@ -978,6 +979,21 @@ def _between(steps: Sequence[Step], a: str, b: str) -> list[float]:
     step's two sensors jumped the datum does not know, and a barometer's jump found against the
     GPS is one against a rangefinder too."""
     return [s.time_s for s in steps if {s.first, s.second} & {a, b}]
+
+
+def _unsettled(
+    t: FloatArray, y: FloatArray, steps: Sequence[Step], pair: tuple[str, str]
+) -> FloatArray:
+    """A barometer's heights ``y`` without those over STEP_SETTLE_S after each of the ``steps``
+    of the ``pair`` (it, or its reference, against any other) that settles back
+    (:attr:`altfuse.steps.Step.settle_m`): a transient, which a scale fit takes for a scale
+    where the flight climbs or descends around it."""
+    out: FloatArray = y.copy()
+    for s in steps:
+        if s.settle_m and {s.first, s.second} & set(pair):
+            start = s.time_s + s.half_width_s
+            out[(t > s.time_s - s.half_width_s) & (t <= start + STEP_SETTLE_S)] = np.nan
+    return out
 
 
 def _scale(

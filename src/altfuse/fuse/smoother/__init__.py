@@ -215,9 +215,9 @@ where neither is, both offsets may jump. A
 tentative step (a sensor regained elsewhere, found below the sure steps' significance:
 :attr:`altfuse.steps.Step.tentative`) is tried as no jump as well, and made one only where the
 likelihood says so (:func:`.evidence.regain_evidence`). Recorded as ``steps`` (time, the jump,
-whose). On the truth logs with one sensor stepped 1 m half-way, within the bar on 12 and 13
+whose). On the truth logs with one sensor stepped 1 m half-way, within the bar on 11 and 13
 of 13 (barometer, GPS) where it was 7 and 12; lost for 10 s and regained 2 m higher, 13 and 13
-where it was 6 and 11; flashed 1, 3, -3 and 10 m (settling back over 15 s), 10, 9, 10 and 4
+where it was 6 and 11; flashed 1, 3, -3 and 10 m (settling back over 15 s), 12, 11, 13 and 9
 where 6, 5, 6 and 2 before the jumps settled and their sensors were told by their own heights;
 the logs without a step unchanged.
 
