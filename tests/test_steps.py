@@ -125,8 +125,8 @@ def test_a_step_settles_as_far_as_the_difference_moves_back_after_it() -> None:
     """A barometer flashed 3 m at 100 s, settling back with a time constant of 5 s: it settles
     by the difference's move back over STEP_SETTLE_S (2.4 m, from its mean over the first 2
     s). A step that holds, or one the difference goes on from (a crash's last seconds part two
-    sensors further), settles by none; lost before the span ends, by the whole step (it may
-    settle unseen)."""
+    sensors further), or one found across a gap, settles by none; lost before the span ends, by
+    the whole step (it may settle unseen)."""
     t, _, z = two_sensors()
     after = t >= 100.0
     flashed = z.copy()
@@ -147,6 +147,12 @@ def test_a_step_settles_as_far_as_the_difference_moves_back_after_it() -> None:
     lost[t >= 110.0, 0] = np.nan
     (step,) = find_steps(t, lost, ("gps", "baro"), KINDS)
     assert step.settle_m == pytest.approx(-step.size_m)
+    # found across the GPS's gap, it has no instant to settle from
+    regained = flashed.copy()
+    regained[(t >= 95.0) & (t < 100.0), 0] = np.nan
+    (step,) = find_steps(t, regained, ("gps", "baro"), KINDS)
+    assert step.half_width_s > 2.0
+    assert step.settle_m == 0.0
 
 
 def test_a_step_across_a_gap_is_found_in_its_middle_and_a_long_gap_is_not_bridged() -> None:

@@ -146,8 +146,11 @@ def _settling(t: FloatArray, d: FloatArray, found: Sequence[_Found]) -> list[flo
     the last STEP_WINDOWS_S[0] less its mean over the first, where that undoes at least
     SETTLE_SHARE of the step (at most all of it) and is SETTLE_SIGMAS times the difference's
     own moves over the span away from the steps (1.4826 MAD of its means that far apart); else
-    0 (a crash's last seconds part two sensors further). Where a sensor is lost before the
-    span or the log ends, the whole step back: it may settle unseen. A barometer flashed by
+    0 (a crash's last seconds part two sensors further), and 0 across a gap (its size drawn
+    out over the gap; the 92 m climb's regained GPS, 2 m read as 2.9, "settled" 2.1 m in its
+    climb, and its barometer's scale fit lost those 20 s: 0.035 -> 0.123 m). Where a sensor
+    is lost before the span or the log ends, the whole step back: it may settle unseen. A
+    barometer flashed by
     light jumps and settles back over 15 s; a GPS's new fix holds, and a GPS's wander moves
     the difference as much everywhere.
 
@@ -168,6 +171,9 @@ def _settling(t: FloatArray, d: FloatArray, found: Sequence[_Found]) -> list[flo
     ends = [time - half for time, _, _, half in found[1:]] + [math.inf]
     out = []
     for (time, size, _, half), end in zip(found, ends, strict=True):
+        if half > float(t[1] - t[0]):  # across a gap: no instant to settle from, nor a size
+            out.append(0.0)
+            continue
         first = int(np.searchsorted(t, time + half))
         last = min(
             int(np.searchsorted(t, min(time + half + STEP_SETTLE_S, end))) - n, means.size - 1
