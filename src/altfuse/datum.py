@@ -53,7 +53,7 @@ from altfuse.errors import NoUsableSensorsError
 from altfuse.inertial import G
 from altfuse.metrics import MAD_TO_SIGMA, running_median, runs
 from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Samples, SensorKind, Series
-from altfuse.steps import STEP_SETTLE_S, STEP_WINDOWS_S, Step, find_steps
+from altfuse.steps import STEP_WINDOWS_S, Step, find_steps
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
 MIN_WINDOW_TICKS = 3
@@ -991,8 +991,8 @@ def _unsettled(
     out: FloatArray = y.copy()
     for s in steps:
         if s.settle_m and {s.first, s.second} & set(pair):
-            start = s.time_s + s.half_width_s
-            out[(t > s.time_s - s.half_width_s) & (t <= start + STEP_SETTLE_S)] = np.nan
+            start, end = s.settling_s
+            out[(t > start) & (t <= end)] = np.nan
     return out
 
 

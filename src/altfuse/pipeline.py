@@ -30,7 +30,7 @@ from altfuse.datum import (
 )
 from altfuse.errors import NoUsableSensorsError, ParameterError, Refusal, UnsupportedLogError
 from altfuse.fuse import DEFAULT_METHOD, METHODS, FusionInput, FusionResult, Method, method
-from altfuse.fuse.base import Jump
+from altfuse.fuse.base import Jump, own_jump
 from altfuse.guard import guard
 from altfuse.inertial import referred_vertical_acceleration, velocity_integral
 from altfuse.io import read_log
@@ -324,12 +324,9 @@ def _jumps(referred: Referred, *, tentative: bool) -> tuple[Jump, ...]:
 
 def _jump(step: Step, names: tuple[str, ...]) -> Jump:
     """``step`` as a fusion method takes it (:func:`_jumps`)."""
-    if step.jumped is None:
-        pair = (names.index(step.first), names.index(step.second))
-        return step.time_s, pair, step.size_m, step.half_width_s, step.settle_m
-    sign = 1.0 if step.jumped == step.second else -1.0
-    jumped = (names.index(step.jumped),)
-    return step.time_s, jumped, sign * step.size_m, step.half_width_s, sign * step.settle_m
+    pair = (names.index(step.first), names.index(step.second))
+    jump = (step.time_s, pair, step.size_m, step.half_width_s, step.settle_m)
+    return jump if step.jumped is None else own_jump(jump, names.index(step.jumped))
 
 
 def run_method(

@@ -117,6 +117,11 @@ class Step:
     settle_m: float = 0.0  # the difference's move back over STEP_SETTLE_S, where it stands out
 
     @property
+    def settling_s(self) -> tuple[float, float]:
+        """The span [s] from the step (its gap's start) to STEP_SETTLE_S after it."""
+        return self.time_s - self.half_width_s, self.time_s + self.half_width_s + STEP_SETTLE_S
+
+    @property
     def tentative(self) -> bool:
         """Found across a gap below STEP_SIGMAS (from REGAIN_SIGMAS): a jump, or none."""
         return self.sigmas <= STEP_SIGMAS

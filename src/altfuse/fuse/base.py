@@ -36,6 +36,14 @@ LogInput = Literal["accel"]
 Jump = tuple[float, tuple[int, ...], float, float, float]
 
 
+def own_jump(step: Jump, sensor: int) -> Jump:
+    """``step`` (between two sensors, the second's jump against the first's) as ``sensor``'s
+    own jump: its size and settling the other way round where it is the first."""
+    time, sensors, size, half, settle = step
+    sign = 1.0 if sensor == sensors[1] else -1.0
+    return (time, (sensor,), sign * size, half, sign * settle)
+
+
 @dataclass(frozen=True)
 class FusionInput:
     """Everything a method fuses, from one log, on one clock and one datum.

@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from altfuse.datum import Track, Wind, wind_beside
-from altfuse.fuse.base import Jump
+from altfuse.fuse.base import Jump, own_jump
 from altfuse.fuse.smoother.model import (
     Events,
     Layout,
@@ -492,15 +492,14 @@ def _options(event: Sequence[Jump]) -> list[list[Jump]]:
     if any(len(p) != 2 for p in pairs):
         return []
     if len(event) == 1:
-        return [[_own(event[0], pairs[0][0])], [_own(event[0], pairs[0][1])]]
+        return [[own_jump(event[0], pairs[0][0])], [own_jump(event[0], pairs[0][1])]]
     (one,) = set.intersection(*(set(p) for p in pairs))  # one shared (:func:`_together`)
-    jumps = [_own(step, one)[2] for step in event]
-    settles = [_own(step, one)[4] for step in event]
+    owns = [own_jump(step, one) for step in event]
     common: Jump = (
-        event[0][0], (one,), float(np.mean(jumps)), max(s[3] for s in event),
-        float(np.mean(settles)),
+        event[0][0], (one,), float(np.mean([o[2] for o in owns])), max(s[3] for s in event),
+        float(np.mean([o[4] for o in owns])),
     )  # fmt: skip
-    return [[common], [_own(step, next(s for s in step[1] if s != one)) for step in event]]
+    return [[common], [own_jump(step, next(s for s in step[1] if s != one)) for step in event]]
 
 
 def _together(steps: Sequence[Jump]) -> list[list[int]]:
@@ -519,11 +518,3 @@ def _together(steps: Sequence[Jump]) -> list[list[int]]:
         shared = set.intersection(*(set(steps[k][1]) for k in e))
         out.extend([e] if len(shared) == 1 else [[k] for k in e])
     return out
-
-
-def _own(step: Jump, sensor: int) -> Jump:
-    """``step`` (between two sensors, the second's jump against the first's) as ``sensor``'s
-    own jump."""
-    time, sensors, size, half, settle = step
-    sign = 1.0 if sensor == sensors[1] else -1.0
-    return (time, (sensor,), sign * size, half, sign * settle)
