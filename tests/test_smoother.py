@@ -25,7 +25,13 @@ from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import NIS_CHECK, SmootherParams, fuse_smoother, model_check
 from altfuse.fuse.smoother.compiled import _forget_other_versions
 from altfuse.fuse.smoother.events import _triangle_sums
-from altfuse.fuse.smoother.evidence import DRIFT_GAIN, evidence_record, stable_gain
+from altfuse.fuse.smoother.evidence import (
+    DRIFT_GAIN,
+    HEARD_SHARE,
+    evidence_record,
+    heard,
+    stable_gain,
+)
 from altfuse.fuse.smoother.model import (
     GPS_CORRELATION_S,
     LEARN_SCALE_STD,
@@ -209,22 +215,42 @@ def test_a_drifting_barometer_gets_a_drift_rate(
         assert params.get("baro_drift_loglik_gain", -1.0) < DRIFT_GAIN
 
 
-@pytest.mark.parametrize(("receivers", "gain"), [(50.0, 109.0), (150.0, -577.0)])
+@pytest.mark.parametrize(
+    ("receivers", "heard", "gain"),
+    [(50.0, True, 109.0), (112.0, True, 109.0), (112.0, False, -577.0), (150.0, True, -577.0)],
+)
 def test_the_stable_gps_wins_by_the_barometers_drift_only_where_it_beats_the_gps_s_own(
-    receivers: float, gain: float
+    receivers: float, heard: bool, gain: float
 ) -> None:
     """The stable GPS's gain over the wandering one (:func:`stable_gain`): with the barometers'
     drift where that gains DRIFT_GAIN and more than its receivers' own drift (as the drift
     test keeps it), else without. The passes' log-likelihoods, one sample each: the stable GPS
     -577 alone, 109 with the barometers' drift, ``receivers`` with the GPS's own (a 305 m
-    climb's barometer flashed 3 m: the stable GPS won by a drift the drift test left out)."""
+    climb's barometer flashed 3 m: the stable GPS won by a drift the drift test left out); the
+    GPS's own drift within DRIFT_GAIN of the barometers' leaves the barometers' drift kept
+    where the GPS's heights are ``heard`` (the witness of a barometer's drift), not where they
+    are not."""
 
     def made(loglik: float) -> dict[str, np.ndarray]:
         return {"accepted": np.array([True]), "loglik": np.array([loglik])}
 
     drifted = [made(DRIFT_GAIN / 2), made(109.0), made(receivers)]
-    assert stable_gain(made(0.0), made(-577.0), drifted) == gain
+    assert stable_gain(made(0.0), made(-577.0), drifted, heard=heard) == gain
     assert stable_gain(made(0.0), made(-577.0)) == -577.0
+
+
+def test_a_gps_s_heights_are_heard_where_a_pass_accepts_half_of_them_or_more() -> None:
+    """The witness of a barometer's drift (:func:`heard`): of the receivers' samples (the
+    events of their columns; 1 a barometer's here) the pass accepted HEARD_SHARE or more; a
+    receiver without samples is not heard."""
+    who = np.array([0, 1, 2, 0, 1, 2, 0, 0])
+    accepted = np.array([True, False, False, False, True, False, True, False])
+    verdicts = {"accepted": accepted, "loglik": np.zeros(who.size)}
+    assert HEARD_SHARE == 0.5
+    assert heard(verdicts, who, (0,))  # 2 of its 4
+    assert not heard(verdicts, who, (2,))  # 0 of 2
+    assert not heard(verdicts, who, (0, 2))  # 2 of 6
+    assert not heard(verdicts, who, (3,))
 
 
 def test_a_gps_that_ramps_away_from_two_barometers_is_not_followed_by_their_drift() -> None:

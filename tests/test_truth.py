@@ -322,11 +322,13 @@ def test_a_barometer_that_reads_high_in_forward_flight_is_corrected(name: str) -
     for 0.6 % more and the smoother the rest for the GPS's wander. With the dynamic head in the
     scale's fit and the smoother's coefficient (:func:`altfuse.datum.dynamic_head`),
     0.013-0.019 m: each within the bar on RMSE and maximum, the coefficient within 0.06 of the
-    truth."""
+    truth; within 0.1 where the barometer's drift is modelled beside it and takes a part of the
+    cruise's head as a slow change (the 305 m climb: 0.95 -> 0.92, 0.019 -> 0.018 m RMSE)."""
     evaluation = evaluate_prepared(changed(name, "airflow-1"), ["smoother"], truth="sim")
     params = evaluation.runs["smoother"].result.params
     assert params["baro_dynamic"] == "modelled"
-    assert params["dynamic_pressure_baro"] == pytest.approx(1.0, abs=0.06)
+    near = 0.1 if params["baro_drift"] == "modelled" else 0.06
+    assert params["dynamic_pressure_baro"] == pytest.approx(1.0, abs=near)
     within_bar(evaluation)
 
 
@@ -522,6 +524,30 @@ def test_a_barometer_that_drifts_beside_a_simulator_s_gps_is_not_followed(name: 
     within_bar(evaluation)
 
 
+@pytest.mark.parametrize(
+    ("name", "how"),
+    [
+        ("copter_4.0.0dev_aadimishra_autotest_climb99m.BIN", "drift-1"),
+        ("plane_3.3.0a1_gitterbadger_autotest_climb386m_imunoise.BIN", "drift-5"),
+    ],
+)
+def test_a_barometer_drifts_where_the_gps_s_own_drift_explains_the_log_alike(
+    name: str, how: str
+) -> None:
+    """Each barometer drifting 1 m in 10 minutes beside the 99 m autotest climb's GPS, 5 m
+    beside the 3.3 plane's: the barometers' drift and the GPS's own explained the log alike
+    (gains of 54.3 and 54.5; 107.5 and 108.2), and with the GPS's a hair ahead neither was
+    modelled: 0.090 and 0.843 m RMSE, the band covering 18 and 26 % of the errors. Taken as the
+    barometers' (the autopilots' estimators correct the barometer by the GPS): within the bar
+    on RMSE and maximum (0.008 and 0.080 m), the band covering 90 % or more."""
+    evaluation = evaluate_prepared(changed(name, how), ["smoother"], truth="sim")
+    params = evaluation.runs["smoother"].result.params
+    assert params["baro_drift"] == "modelled"
+    assert params["gps_drift_loglik_gain"] > params["baro_drift_loglik_gain"]
+    result = within_bar(evaluation)
+    assert result["coverage"] >= 0.9, result
+
+
 def test_a_barometer_s_flash_is_its_jump_settling_beside_a_stable_gps() -> None:
     """The 305 m climb's barometer flashed 3 m and settling back over 15 s (``flash-3``). It
     was a transient no model had: the stable GPS beside the barometer's drift explained it (a
@@ -630,15 +656,17 @@ def test_a_plane_s_barometer_scale_makes_no_step_where_its_dive_ends() -> None:
 def test_a_barometer_scale_a_real_receiver_cannot_tell_widens_the_band() -> None:
     """The 10 m hexacopter with a real receiver's GPS (0.3 m noisy, wandering 1 m in 100 s):
     against it the barometer's 5 % is 0.99 +- 0.07, neither applied nor learnt, and the
-    smoother follows the barometer 0.43 m above the truth; its band, the barometer's scale
-    taken as exact, was 2-5 cm (coverage 0.05). It now counts the scale's physical spread."""
+    smoother followed the barometer 0.43 m above the truth; its band, the barometer's scale
+    taken as exact, was 2-5 cm (coverage 0.05). It now counts the scale's physical spread. The
+    barometer's drift, kept where the receiver's own explains the log alike (gains of 5.7 and
+    7.7), takes a part of the error nothing else in the log tells: 0.177 m RMSE."""
     prepared = changed("copter_4.0.4rc2_leaerialtech_hexa_10m.BIN", "noisy-gps")
     baro = {o.name: o for o in prepared.referred.offsets}["baro"]
     assert not baro.scale_applied
     assert baro.scale_std is not None
     assert baro.scale_std > 0.05
     result = verdict(evaluate_prepared(prepared, ["smoother"], truth="sim"), "smoother")
-    assert result["rmse"] > 0.3  # the barometer's error, which nothing in the log tells
+    assert result["rmse"] < 0.25, result  # 0.177: 0.429 where the drift was left out
     assert result["coverage"] >= 0.9, result
 
 

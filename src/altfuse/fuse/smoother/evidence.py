@@ -29,6 +29,9 @@ from altfuse.model import FloatArray
 #: drift rate absorbs a warming as readily as a drift; at a Bayes factor of 20 (a gain of 3) it
 #: was taken on a simulated climb that does not drift and took its warming (0.297 -> 0.400 m).
 DRIFT_GAIN = 10.83 / 2
+#: ... and the least share of the GPS's heights a pass accepts for them to witness the
+#: barometers' drift (:func:`heard`).
+HEARD_SHARE = 0.5
 #: What the scale's test keeps of the pass without the scale: the height (the scale's regressor)
 #: and the samples' log-likelihoods.
 HEIGHTS = Keep(states=(0,), var_h=False, rows=False, verdicts=frozenset(("loglik",)))
@@ -140,11 +143,12 @@ def gps_evidence(
     """
     trial = replace(ev, q_state=stable)
     models = [(ev, r, layout), (trial, r, layout)]
+    barometers, receivers = _drifting(layout, kinds)
     if "baro" in kinds:
-        barometers, receivers = _drifting(layout, kinds)
         models += [(ev, r, barometers), (trial, r, barometers), (trial, r, receivers)]
     default, richer, *drifted = likelihoods(*models)
-    gain = stable_gain(default, richer, drifted)
+    gps_heard = heard(default, ev.who, receivers.drifting)
+    gain = stable_gain(default, richer, drifted, heard=gps_heard)
     chosen, verdicts = (trial, richer) if gain > STABLE_GAIN else (ev, default)
     return chosen, gain, Made(chosen, layout, verdicts)
 
@@ -153,29 +157,55 @@ def stable_gain(
     default: dict[str, np.ndarray],
     stable: dict[str, np.ndarray],
     drifted: Sequence[dict[str, np.ndarray]] = (),
+    *,
+    heard: bool = True,
 ) -> float:
     """The stable GPS's log-likelihood gain over the wandering one's (the passes ``default``
     and ``stable``); with ``drifted``, the same two passes with the barometers' drift rates
     and the stable one's with its receivers' drift instead, each GPS model's best against the
     other's: with the barometers' drift where it gains DRIFT_GAIN over the same model without,
-    and in the stable model more than the receivers' drift, as :func:`drift_evidence` keeps
-    it. A barometer flashed 3 m (settling back over 15 s) beside the simulators' 305 m climb's
-    GPS: the stable GPS with the barometer's drift won (109), and the drift test, which the
-    GPS's own drift explained better, left it out: 0.254 m RMSE; 0.041 with the GPS
-    wandering."""
+    and in the stable model where the receivers' drift does not gain clearly more (more, where
+    the GPS's heights are not ``heard``), as :func:`drift_evidence` keeps it. A barometer
+    flashed 3 m (settling back over 15 s) beside the simulators' 305 m climb's GPS: the stable
+    GPS with the barometer's drift won (109), and the drift test, which the GPS's own drift
+    explained better, left it out: 0.254 m RMSE; 0.041 with the GPS wandering."""
     gain = evidence_gain(default, stable)
     if not drifted:
         return gain
     wandering, barometers, receivers = (evidence_gain(default, d) for d in drifted)
     best_wandering = wandering if _drift_kept(wandering) else 0.0
-    return (barometers if _drift_kept(barometers, receivers, gain) else gain) - best_wandering
+    kept = _drift_kept(barometers, receivers, gain, heard=heard)
+    return (barometers if kept else gain) - best_wandering
 
 
-def _drift_kept(drift: float, rival: float = -math.inf, without: float = 0.0) -> bool:
+def _drift_kept(
+    drift: float, rival: float = -math.inf, without: float = 0.0, *, heard: bool = True
+) -> bool:
     """Whether the barometers' drift rates are kept, their model's log-likelihood gain
     ``drift`` (over some pass) DRIFT_GAIN above the model without's (``without``, over the same
-    pass) and above the receivers' own drift's (``rival``; -inf: not offered)."""
-    return drift > without + DRIFT_GAIN and rival < drift
+    pass) and the receivers' own drift's (``rival``; -inf: not offered) not DRIFT_GAIN above it
+    where the GPS's heights are ``heard`` (:func:`heard`), not above it where they are not.
+
+    Where the two explain the log alike, the barometers drift: a slow parting of barometer and
+    GPS tells no more than that one drifts, and pressure does (the weather, a board warming),
+    as both autopilots' estimators take it: ArduPilot's EKF3 corrects the barometer's datum
+    for its drift by the GPS's height (``EK3_OGN_HGT_MASK``), PX4's EKF2 estimates a barometer
+    bias against the GNSS height. Each barometer drifting 1 m in 10 minutes beside the
+    simulators' 99 m autotest climb's GPS: gains of 54.3 and 54.5, the drift left out, 0.090 m
+    RMSE (0.008 with it); 5 m beside the 3.3 plane's, 107.5 and 108.2: 0.843 m (0.080). A GPS
+    whose heights are rejected is no such reference: a real log's receiver 15 m off its
+    barometer, 4 % of its heights accepted (gains of 9.2 and 9.8), drifted the barometer by
+    its vertical velocity alone, the fused height 1.8 m above the barometer and 10 m above
+    the GPS for 28 s."""
+    return drift > without + DRIFT_GAIN and rival < drift + (DRIFT_GAIN if heard else 0.0)
+
+
+def heard(verdicts: dict[str, np.ndarray], who: np.ndarray, receivers: Sequence[int]) -> bool:
+    """Whether the GPS's heights witness the barometers' drift: at least HEARD_SHARE of the
+    samples of the ``receivers`` (sensor columns) accepted by the pass ``verdicts`` of events
+    ``who``."""
+    theirs = np.isin(who, receivers)
+    return bool(theirs.any()) and float(verdicts["accepted"][theirs].mean()) >= HEARD_SHARE
 
 
 def _drifting(layout: Layout, kinds: Sequence[str]) -> tuple[Layout, Layout]:
@@ -310,10 +340,10 @@ def drift_evidence(
 
     A barometer and a GPS that part slowly tell no more than that one of them drifts. Where the
     log has a GPS, the drift is offered to its receivers instead, too, and the barometers'
-    is modelled only where it explains the log better than theirs: a receiver powered on
-    before its fix settled climbed 20 m in 150 s against a barometer, a second GPS and a
-    rangefinder that agreed with each other, and the barometer's drift (a gain of 7.4) took
-    the fused height 2 m above all three (the GPS's own: a gain of 214)."""
+    is modelled unless theirs explains the log clearly better (:func:`_drift_kept`): a receiver
+    powered on before its fix settled climbed 20 m in 150 s against a barometer, a second GPS
+    and a rangefinder that agreed with each other, and the barometer's drift (a gain of 7.4)
+    took the fused height 2 m above all three (the GPS's own: a gain of 214)."""
     if "baro" not in kinds:
         return layout, {}
     drifting, receivers = _drifting(layout, kinds)
@@ -327,12 +357,12 @@ def drift_evidence(
         passes = likelihoods(*models)
     gain = evidence_gain(stable, passes[0])
     rival = evidence_gain(stable, passes[1]) if receivers.drifting else -math.inf
-    modelled = _drift_kept(gain, rival)
+    modelled = _drift_kept(gain, rival, heard=heard(stable, ev.who, receivers.drifting))
     record = evidence_record("drift", modelled, gain)
     if math.isfinite(rival):
         record["gps_drift_loglik_gain"] = rival  # the rival's, never modelled itself
     if _drift_kept(gain) and not modelled:
-        record["baro_drift"] = "not modelled (the GPS's own drift explains the log as well)"
+        record["baro_drift"] = "not modelled (the GPS's own drift explains the log better)"
     return (drifting if modelled else layout), record
 
 
