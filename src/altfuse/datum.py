@@ -935,19 +935,15 @@ def baro_scales(
             i: Scale(1.0, None, "", "not estimated: no GPS or rangefinder", False) for i in baros
         }
     air = _air_columns(track, aligned.t)
+
+    def fit(i: int, j: int) -> Scale:
+        theirs = _between(steps, names[i], names[j])
+        y = _unsettled(aligned.t, h[:, i], theirs)
+        return _scale(aligned.t, (h[:, j], y), names[j], [s.time_s for s in theirs], air)
+
     return {
         i: min(
-            (
-                _scale(
-                    aligned.t,
-                    (h[:, j], _unsettled(aligned.t, h[:, i], steps, (names[i], names[j]))),
-                    names[j],
-                    _between(steps, names[i], names[j]),
-                    air,
-                )
-                for j in references
-            ),
-            key=lambda sc: math.inf if sc.std is None else sc.std,
+            (fit(i, j) for j in references), key=lambda sc: math.inf if sc.std is None else sc.std
         )
         for i in baros
     }
@@ -974,23 +970,21 @@ def _in_time(t: FloatArray, valid: npt.NDArray[np.bool_]) -> tuple[FloatArray, f
     return (t - t[valid][0]) / 60.0, float(valid.sum()) / max(blocks, 2.0)
 
 
-def _between(steps: Sequence[Step], a: str, b: str) -> list[float]:
-    """The times [s] of the ``steps`` of sensor ``a`` or ``b`` against any other: which of a
-    step's two sensors jumped the datum does not know, and a barometer's jump found against the
-    GPS is one against a rangefinder too."""
-    return [s.time_s for s in steps if {s.first, s.second} & {a, b}]
+def _between(steps: Sequence[Step], a: str, b: str) -> list[Step]:
+    """The ``steps`` of sensor ``a`` or ``b`` against any other: which of a step's two sensors
+    jumped the datum does not know, and a barometer's jump found against the GPS is one against
+    a rangefinder too."""
+    return [s for s in steps if {s.first, s.second} & {a, b}]
 
 
-def _unsettled(
-    t: FloatArray, y: FloatArray, steps: Sequence[Step], pair: tuple[str, str]
-) -> FloatArray:
+def _unsettled(t: FloatArray, y: FloatArray, steps: Sequence[Step]) -> FloatArray:
     """A barometer's heights ``y`` without those over STEP_SETTLE_S after each of the ``steps``
-    of the ``pair`` (it, or its reference, against any other) that settles back
+    (its own or its reference's, :func:`_between`) that settles back
     (:attr:`altfuse.steps.Step.settle_m`): a transient, which a scale fit takes for a scale
     where the flight climbs or descends around it."""
     out: FloatArray = y.copy()
     for s in steps:
-        if s.settle_m and {s.first, s.second} & set(pair):
+        if s.settle_m:
             start, end = s.settling_s
             out[(t > start) & (t <= end)] = np.nan
     return out

@@ -306,11 +306,11 @@ def _stuck(s: Series, others: list[Series]) -> tuple[Mask, list[str]]:
 
 def _thawed(s: Series, run: tuple[int, int], other: Series) -> bool:
     """Whether ``s``, one value over its samples ``run`` (``a`` to ``b``, the first after it),
-    thawed where it froze: its step at the thaw under half of ``other``'s net change from the
-    run's start to the thaw (medians over THAW_WINDOW_S at either end) and under MOTION_MIN_M
-    / 2. A receiver frozen while the vehicle moved thaws where the vehicle went (or at a value
-    it never had); one at rest beside another sensor's excursion (a barometer's flash of
-    light, its glitch) thaws where it was, and the excursion was the other's. Kept, the two
+    thawed where it froze: its step at the thaw under half the larger of ``other``'s net change
+    from the run's start to the thaw (medians over THAW_WINDOW_S at either end) and
+    MOTION_MIN_M. A receiver frozen while the vehicle moved thaws where the vehicle went (or at
+    a value it never had); one at rest beside another sensor's excursion (a barometer's flash
+    of light, its glitch) thaws where it was, and the excursion was the other's. Kept, the two
     disagree before the fusion, which the accelerometer and the guard judge; dropped, the
     excursion is all that is left. A sensor frozen to the log's end never thaws."""
     a, b = run

@@ -66,7 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from altfuse.metrics import MAD_TO_SIGMA, white_noise_sigma
+from altfuse.metrics import MAD_TO_SIGMA, mad_sigma, white_noise_sigma
 from altfuse.model import FloatArray, SensorKind
 
 #: Spans [s] of the lines either side of a boundary.
@@ -155,9 +155,8 @@ def _settling(t: FloatArray, d: FloatArray, found: Sequence[_Found]) -> list[flo
     out over the gap; the 92 m climb's regained GPS, 2 m read as 2.9, "settled" 2.1 m in its
     climb, and its barometer's scale fit lost those 20 s: 0.035 -> 0.123 m). Where a sensor
     is lost before the span or the log ends, the whole step back: it may settle unseen. A
-    barometer flashed by
-    light jumps and settles back over 15 s; a GPS's new fix holds, and a GPS's wander moves
-    the difference as much everywhere.
+    barometer flashed by light jumps and settles back over 15 s; a GPS's new fix holds, and a
+    GPS's wander moves the difference as much everywhere.
 
     Its offset let settle as far (:func:`altfuse.fuse.smoother.noise.with_jumps`), the
     smoother follows the other sensor while it does: a barometer's flash of 1-10 m, its jump
@@ -212,7 +211,7 @@ def _quiet_wander(t: FloatArray, means: FloatArray, found: Sequence[_Found], n: 
     moves = moves[np.isfinite(moves) & ~across]
     if moves.size < 10:
         return 0.0
-    return MAD_TO_SIGMA * float(np.median(np.abs(moves - np.median(moves))))
+    return mad_sigma(moves)
 
 
 def _jumped(

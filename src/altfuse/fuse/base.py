@@ -44,6 +44,18 @@ def own_jump(step: Jump, sensor: int) -> Jump:
     return (time, (sensor,), sign * size, half, sign * settle)
 
 
+def joined_jump(jumps: Sequence[Jump], sensors: tuple[int, ...], half: float) -> Jump:
+    """``jumps`` made one jump of ``sensors`` at the first's time, within ``half`` of it [s]:
+    their mean size and mean settling."""
+    return (
+        jumps[0][0],
+        sensors,
+        float(np.mean([j[2] for j in jumps])),
+        half,
+        float(np.mean([j[4] for j in jumps])),
+    )
+
+
 @dataclass(frozen=True)
 class FusionInput:
     """Everything a method fuses, from one log, on one clock and one datum.

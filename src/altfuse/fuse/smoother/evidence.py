@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from altfuse.datum import Track, Wind, wind_beside
-from altfuse.fuse.base import Jump, own_jump
+from altfuse.fuse.base import Jump, joined_jump, own_jump
 from altfuse.fuse.smoother.model import (
     Events,
     Layout,
@@ -524,11 +524,7 @@ def _options(event: Sequence[Jump]) -> list[list[Jump]]:
     if len(event) == 1:
         return [[own_jump(event[0], pairs[0][0])], [own_jump(event[0], pairs[0][1])]]
     (one,) = set.intersection(*(set(p) for p in pairs))  # one shared (:func:`_together`)
-    owns = [own_jump(step, one) for step in event]
-    common: Jump = (
-        event[0][0], (one,), float(np.mean([o[2] for o in owns])), max(s[3] for s in event),
-        float(np.mean([o[4] for o in owns])),
-    )  # fmt: skip
+    common = joined_jump([own_jump(step, one) for step in event], (one,), max(s[3] for s in event))
     return [[common], [own_jump(step, next(s for s in step[1] if s != one)) for step in event]]
 
 
