@@ -24,7 +24,7 @@ from altfuse.evaluation import evaluate
 from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import NIS_CHECK, SmootherParams, fuse_smoother, model_check
 from altfuse.fuse.smoother.compiled import _forget_other_versions
-from altfuse.fuse.smoother.events import _triangle_sums
+from altfuse.fuse.smoother.events import TICK, _triangle_sums
 from altfuse.fuse.smoother.evidence import (
     DRIFT_GAIN,
     HEARD_SHARE,
@@ -34,12 +34,14 @@ from altfuse.fuse.smoother.evidence import (
 )
 from altfuse.fuse.smoother.model import (
     GPS_CORRELATION_S,
+    LANDED_MARGIN_S,
     LEARN_SCALE_STD,
     OFFSET_PRIOR,
     SCALE_PRIOR,
     STILL_SIGMA,
     Events,
     datum_priors,
+    landed_events,
     scales_to_relearn,
 )
 from altfuse.fuse.smoother.noise import (
@@ -651,6 +653,20 @@ def test_a_real_landing_is_back_on_its_sensors_within_a_second() -> None:
     assert np.max(np.abs(run.result.fused[after] - z[after, 0])) < 0.04  # 0.020; 0.139 before
 
 
+def test_a_landed_verdict_is_held_short_of_its_turns_only() -> None:
+    """A detector says "landed" after the touch-down and "flying" after the lift-off: the hold
+    keeps LANDED_MARGIN_S from each turn of the verdict, and none from the log's own ends,
+    where the verdict has no turn (a log begun and ended on the ground)."""
+    times = np.arange(0.0, 30.0 + 1e-9, 0.1)
+    said = Samples(np.array([0.0, 10.0, 20.0, 30.0]), np.array([1.0, 0.0, 1.0, 1.0]))
+    held = landed_events(times, np.full(times.size, TICK), said, None)
+    m = LANDED_MARGIN_S
+    expected = ((times >= 0.0) & (times <= 10.0 - m)) | ((times >= 20.0 + m) & (times <= 30.0))
+    np.testing.assert_array_equal(held, expected)
+    # a sample is no tick: the hold is on the clock's ticks alone
+    assert not landed_events(times, np.zeros(times.size, dtype=int), said, None).any()
+
+
 @pytest.mark.parametrize("step_m", [0.0, 3.0])
 def test_a_land_detector_saying_landed_in_a_descent_is_not_held(step_m: float) -> None:
     """A land detector can say landed in the air: Copter 3.4's did in a 10 m/s descent from
@@ -674,7 +690,7 @@ def test_a_land_detector_saying_landed_in_a_descent_is_not_held(step_m: float) -
     said = Samples(np.array([0.0, 11.0, 11.0, 40.0]), np.array([0.0, 0.0, 1.0, 1.0]))
     res = fuse_smoother(replace(inputs, landed=said), SmootherParams())
     if step_m:
-        assert res.params["landed_held_s"] == pytest.approx(25.0, abs=0.1)  # 13-38 s
+        assert res.params["landed_held_s"] == pytest.approx(27.0, abs=0.1)  # 13 s to the end
         assert np.nanmax(np.abs(res.fused)) < 0.15  # 0.07: the GPS's step is its own
         return
     assert res.params["landed_held_s"] == 0.0

@@ -278,12 +278,21 @@ def test_the_gps_course_is_its_velocity_s_direction() -> None:
     assert (speed.value > 1.0).sum() > 40  # 47 samples moving: the course tells there
 
 
-def test_the_land_detector_holds_a_vehicle_on_the_ground_still() -> None:
+@pytest.mark.parametrize(
+    ("name", "bound"),
+    [
+        ("px4ulogrs_6ba1abc7-b433-4029-b8f5-3b2bb12d3b6c.ulg", 0.004),
+        ("pyulog_sample_logging_tagged_and_default_params.ulg", 0.009),
+    ],
+)
+def test_the_land_detector_holds_a_vehicle_on_the_ground_still(name: str, bound: float) -> None:
     """PX4's vehicle_land_detected says the simulator's vehicle stood on the ground throughout:
-    the smoother holds v = 0 there (2 s in from each end of the verdict), where the
-    accelerometer alone let the height wander 1-2 cm: RMSE 0.0106 -> 0.0083 m against the
-    groundtruth, below the EKF's 0.0088."""
-    path = shared_log("px4/px4ulogrs_6ba1abc7-b433-4029-b8f5-3b2bb12d3b6c.ulg")
+    the smoother holds v = 0 over the whole verdict, which never turns, where the
+    accelerometer alone let the height wander 1-2 cm. Held 2 s in from each end of the
+    verdict as from a turn, the 11 s log's height sloped 4 cm in its first seconds: RMSE
+    against the groundtruth 0.0066 and 0.0129 m (the EKF's 0.0088 and 0.0106); 0.0021 and
+    0.0067 held throughout."""
+    path = shared_log(f"px4/{name}")
     landed = read_log(path).landed
     assert landed is not None
     assert landed.source == "vehicle_land_detected.landed"
@@ -291,9 +300,9 @@ def test_the_land_detector_holds_a_vehicle_on_the_ground_still() -> None:
     result = evaluate(path, ["smoother"], truth="sim")
     params = result.runs["smoother"].result.params
     span = float(landed.t[-1] - landed.t[0])
-    assert params["landed_held_s"] == pytest.approx(span - 4.0, abs=0.3)
+    assert params["landed_held_s"] == pytest.approx(span, abs=0.3)
     rmse = {r.name: r.overall.rmse for r in result.rows}
-    assert rmse["smoother"] < rmse["ekf"]
+    assert rmse["smoother"] < min(bound, rmse["ekf"])
     held = result.runs["smoother"].result.tick_traces["velocity"][20:-20]
     free = run_method(prepare(replace(read_log(path), landed=None), FuseOptions()), FuseOptions())
     loose = free.result.tick_traces["velocity"][20:-20]
