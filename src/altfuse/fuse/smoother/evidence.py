@@ -147,7 +147,8 @@ def gps_evidence(
     if "baro" in kinds:
         models += [(ev, r, barometers), (trial, r, barometers), (trial, r, receivers)]
     default, richer, *drifted = likelihoods(*models)
-    gps_heard = heard(default, ev.who, receivers.drifting)
+    # whether the GPS witnesses the barometers' drift: asked only where a drift is offered
+    gps_heard = bool(drifted) and heard(default, ev.who, receivers.drifting)
     gain = stable_gain(default, richer, drifted, heard=gps_heard)
     chosen, verdicts = (trial, richer) if gain > STABLE_GAIN else (ev, default)
     return chosen, gain, Made(chosen, layout, verdicts)
