@@ -10,6 +10,7 @@ import errno
 import io
 import json
 import os
+import re
 import shutil
 import signal
 import stat
@@ -25,7 +26,7 @@ from click.testing import CliRunner, Result
 
 from altfuse import batch as batch_module
 from altfuse import write
-from altfuse.batch import BatchOptions, run_batch
+from altfuse.batch import BatchOptions, LogResult, run_batch, write_summary
 from altfuse.cli import cli
 from altfuse.errors import ParameterError
 from altfuse.signals import GRACE_S, Terminated, raise_on_sigterm
@@ -405,6 +406,22 @@ def test_batch_summary_is_merged_not_replaced(tmp_path: Path) -> None:
     (out / "summary.csv").write_text("not,a\nsummary,at all\n")
     with pytest.raises(ParameterError, match="not a batch summary"):
         run_batch([tmp_path / "two"], out, again, jobs=1)
+
+
+def test_a_merged_summary_keeps_its_number_format_where_the_new_rows_are_empty(
+    tmp_path: Path,
+) -> None:
+    """The earlier rows' numbers stay at 6 decimals where every log run now was refused (its
+    metrics empty): pandas 3 typed such a column by the empty values too, and wrote the earlier
+    flight's span as 119.9 and its share fused with all its digits."""
+    out = tmp_path / "out"
+    run_batch([copies(tmp_path / "one", "a.bin")], out, jobs=1)
+    refused = LogResult("b.bin", "refused", error="an ArduSub log; its BARO is water depth")
+    write_summary([refused], out / "summary.csv", previous=pd.read_csv(out / "summary.csv"))
+    row = next(r for r in (out / "summary.csv").read_text().splitlines() if r.startswith("a.bin,"))
+    decimals = [len(v.partition(".")[2]) for v in row.split(",") if re.fullmatch(r"-?\d+\.\d+", v)]
+    assert len(decimals) >= 3  # flight_s, processing_s, fused_share, max_excursion_m
+    assert set(decimals) == {6}
 
 
 def test_a_damaged_sidecar_means_redo_that_log(tmp_path: Path) -> None:

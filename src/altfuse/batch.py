@@ -621,7 +621,12 @@ def write_summary(
         skipped = table.loc[table["status"] == "skipped", "log"]
         kept = earlier.loc[earlier.index.isin(skipped)].assign(status="skipped")
         others = earlier.loc[~earlier.index.isin(table["log"])]
-        table = pd.concat([table[table["status"] != "skipped"], kept, others], ignore_index=True)
+        parts = [table[table["status"] != "skipped"], kept, others]
+        names = list(dict.fromkeys(c for part in parts for c in part.columns))
+        # each column typed by the parts that hold values in it, as pandas 2 did (it warned
+        # that pandas 3 would type it by its empty and all-missing parts too)
+        held = [part.dropna(axis=1, how="all") for part in parts if not part.empty]
+        table = pd.concat(held, ignore_index=True).reindex(columns=names)
     table = table.reindex(columns=columns + [c for c in table.columns if c not in columns])
     table = table.sort_values("log", kind="stable")
     with atomic_outputs() as stage:
