@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import logging
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
@@ -70,6 +72,18 @@ def paper_a_flight(seed: int = 7) -> PaperAFlight:
     departure = 2.5 * np.sin(np.pi * (k[136:255] - 136) / 119.0)
     z[136:255, 1] += departure
     return PaperAFlight(truth=truth, z=z)
+
+
+@pytest.fixture(autouse=True)
+def _altfuse_logger_restored() -> Iterator[None]:
+    """The ``altfuse`` logger as it was before each test: a command run in the test's process
+    (``CliRunner``) sets its handler, level and propagation for its own stderr, which later
+    tests' ``caplog`` would otherwise miss (pytest before 9 sees no record of a logger that
+    does not propagate)."""
+    logger = logging.getLogger("altfuse")
+    kept = logger.handlers[:], logger.level, logger.propagate
+    yield
+    logger.handlers[:], logger.level, logger.propagate = kept
 
 
 @pytest.fixture
