@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import hashlib
 import json
@@ -30,7 +31,8 @@ def as_text(
     in their units, as Mission Planner writes them); floats to ``digits`` significant digits
     where given (Mission Planner's are rounded), all of them otherwise."""
     lines = []
-    with DFReader.DFReader_binary(str(log), zero_time_base=False) as reader:
+    # closing: a reader is a context manager itself only since pymavlink 2.4.50
+    with contextlib.closing(DFReader.DFReader_binary(str(log), zero_time_base=False)) as reader:
         while (message := reader.recv_msg()) is not None:
             values = [getattr(message, column) for column in message.fmt.columns]
             if digits is not None:
@@ -42,7 +44,7 @@ def as_text(
 
 def records_in(text: Path) -> int:
     """The records pymavlink, the authority, reads in the text log ``text``."""
-    with DFReader.DFReader_text(str(text)) as reader:
+    with contextlib.closing(DFReader.DFReader_text(str(text))) as reader:
         return sum(reader.counts.values())
 
 
