@@ -566,11 +566,25 @@ def test_a_batch_starts_no_more_workers_than_logs(
     assert started == [2]
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forked on Linux alone")
+def test_a_batch_forks_its_workers_whatever_python_s_default(tmp_path: Path) -> None:
+    """Python 3.14 starts processes with a fork server on Linux by default: its workers, the
+    server's children, ended at their start (their parent not the batch), and every log
+    failed; a killed batch's server and workers would run on."""
+    default = multiprocessing.get_start_method(allow_none=True)
+    multiprocessing.set_start_method("forkserver", force=True)
+    try:
+        results = run_batch([SAMPLES / "paper_a.bin", SAMPLES / "hover.bin"], tmp_path, jobs=2)
+    finally:
+        multiprocessing.set_start_method(default, force=True)
+    assert [r.status for r in results] == ["ok", "ok"]
+
+
 def test_a_batch_worker_computes_on_one_thread() -> None:
     """The workers fork from a process that loaded numpy (a Python caller's): each holds its
     BLAS pool to one thread, or the pools spin beside the other workers (8 logs of 30 MB on 2
     cores: as long at two jobs as at one)."""
-    context = multiprocessing.get_context()
+    context = multiprocessing.get_context(batch_module.START_METHOD)
     started = context.SimpleQueue()
     with ProcessPoolExecutor(
         1, mp_context=context, initializer=_worker_start, initargs=(os.getpid(), started)

@@ -74,6 +74,12 @@ TEXT_PATTERN = "*.log"
 #: The summary as Parquet too, with ``--format parquet``.
 PARQUET_SUMMARY = "summary.parquet"
 _PR_SET_PDEATHSIG = 1
+#: How the workers start: forked on Linux, so that the batch is their parent and a killed
+#: batch's workers end with it (``PR_SET_PDEATHSIG``, :func:`_worker_start`). Python 3.14's
+#: default there is a fork server, their parent instead: each worker ended at its start (its
+#: parent not the batch), and a killed batch's server and workers ran on (CPython's own).
+#: Elsewhere the platform's default (macOS and Windows spawn them).
+START_METHOD = "fork" if sys.platform.startswith("linux") else None
 #: Exit code of a batch in which some logs failed (0: all ok; 1/2: the batch itself could not run).
 EXIT_PARTIAL = 4
 
@@ -483,7 +489,7 @@ def _pool(
     lost when a worker died, those that had started and those that had not. No more processes
     than jobs: a pool that forks starts them all at once (``-j 99999`` over 4 logs forked
     until the system killed the batch, exit 137)."""
-    context = multiprocessing.get_context()
+    context = multiprocessing.get_context(START_METHOD)
     started = context.SimpleQueue()
     lost: list[Job] = []
     with ProcessPoolExecutor(
