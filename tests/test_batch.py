@@ -33,6 +33,9 @@ from altfuse.pipeline import FuseOptions
 from conftest import ROOT, shared_log
 
 SAMPLES = ROOT / "sample_logs"
+#: The test clusters' HTTP server on a free port: ``dashboard_address=None`` still listens on
+#: 8787, and a second cluster (a concurrent test run) found it taken and failed to start.
+DASHBOARD = ":0"
 
 
 def outputs(folder: Path) -> dict[str, Path]:
@@ -225,7 +228,7 @@ def test_local_processes_and_a_dask_local_cluster_write_identical_outputs(tmp_pa
     options = BatchOptions(evaluate=True, plot="svg", weights=True)
     local = run_batch(logs, tmp_path / "local", options, jobs=2)
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=DASHBOARD
     ) as cluster:
         remote = run_batch(logs, tmp_path / "dask", options, scheduler=cluster.scheduler_address)
     assert sorted((r.log, r.status) for r in local) == sorted((r.log, r.status) for r in remote)
@@ -263,7 +266,9 @@ def test_a_log_whose_dask_workers_die_fails_its_own_row(
     logs.mkdir()
     for name in ("greedy.bin", "beside.bin", "bare.bin"):
         (logs / name).write_bytes(b"x")
-    with distributed.LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster:
+    with distributed.LocalCluster(
+        n_workers=1, processes=False, dashboard_address=DASHBOARD
+    ) as cluster:
         results = run_batch([logs], tmp_path / "out", scheduler=cluster.scheduler_address)
     rows = {r.log: (r.status, r.error) for r in results}
     assert rows["beside.bin"] == ("ok", "")
