@@ -18,6 +18,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pandas as pd
@@ -325,6 +326,19 @@ def test_sigterm_to_the_command_is_one_line(tmp_path: Path) -> None:
     assert not out.exists() or list(out.iterdir()) == []
 
 
+@contextlib.contextmanager
+def sigint_handled() -> Iterator[None]:
+    """SIGINT handled in this process meanwhile, so that a program started here gets it at its
+    default, as from a terminal: a shell starts a job in the background (``pytest &``) with
+    SIGINT ignored, a program inherits that, and Python then leaves it ignored (altfuse too,
+    as ``nohup`` means it to be)."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
 @pytest.mark.parametrize(
     ("signum", "said"), [(signal.SIGTERM, "terminated"), (signal.SIGINT, "interrupted")]
 )
@@ -337,12 +351,24 @@ def test_a_signal_ends_a_first_run_while_it_compiles(
     line, with the signal's exit code and no output."""
     out = tmp_path / "out"
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))  # nothing compiled yet
-    with subprocess.Popen(
-        [sys.executable, "-m", "altfuse", "-v", "fuse", str(SAMPLE_LOG), "-o", str(out / "f.csv")],
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-    ) as proc:
+    with (
+        sigint_handled(),
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "altfuse",
+                "-v",
+                "fuse",
+                str(SAMPLE_LOG),
+                "-o",
+                str(out / "f.csv"),
+            ],
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        ) as proc,
+    ):
         assert proc.stderr is not None
         for line in proc.stderr:  # the smoother's loops are being compiled
             if "compiling altfuse.fuse.smoother" in line:
