@@ -237,18 +237,18 @@ not see every error: a random-walk offset absorbs a slow one (on the simulators'
 check reads 0.1-1.3 where the +-2 sigma coverage runs from 0.63 to 1.00; the velocity's
 0.01-0.3, its floor above its noise there).
 
-Measured (``benchmarks/smoother_accuracy.py``, 198 simulated flights): the lowest RMSE of all
+Measured (``benchmarks/smoother_accuracy.py``, 210 simulated flights): the lowest RMSE of all
 methods on every one (the closest: the climb with seed 1 and its barometer 7 % high, 0.84 of
-support's); 94.7 % of the true errors within +-2 ``fused_std`` over all, 0.31
-to 1.00 per flight (the lowest on that climb), 76 of the flights within 0.90-0.99; with the
-barometer in the airflow in a 2 m/s wind along the track (``baro-airflow``) 0.06-0.13 m (the
+support's); 94.9 % of the true errors within +-2 ``fused_std`` over all, 0.31
+to 1.00 per flight (the lowest on that climb), 83 of the flights within 0.90-0.99; with the
+barometer in the airflow in a 2 m/s wind along the track (``baro-airflow``) 0.05-0.13 m (the
 mission's wind told against the height smoothed without the barometer, 1.4-2.0 m/s; the
-climb flies one way, where no wind can be told apart from the head), 0.41-0.49 for the
+climb flies one way, where no wind can be told apart from the head), 0.41-0.55 for the
 best other method. On the
 simulators' 13 truth logs (``benchmarks/truth_accuracy.py``, README "Accuracy"): RMSE and
 maximum error within the project's bar on all 13; the coverage 0.911-1.000, within 0.90-0.99
-on 8 (0.995-1.000 on five, among them those whose sensors lag the truth least:
-``TIMING_SIGMA_S``; the quadplane's, whose scale the smoother learns, 0.997).
+on 8 (0.994-1.000 on five, among them those whose sensors lag the truth least:
+``TIMING_SIGMA_S``; the quadplane's, whose scale the smoother learns, 0.994).
 Where GPS and barometer are alone through Paper A's
 excursion, part of it is followed and ``fused_std`` is too small.
 
