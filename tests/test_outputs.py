@@ -339,6 +339,29 @@ def sigint_handled() -> Iterator[None]:
         signal.signal(signal.SIGINT, before)
 
 
+@contextlib.contextmanager
+def compiling(tmp_path: Path) -> Iterator[subprocess.Popen[str]]:
+    """``altfuse -v fuse`` of the sample log where nothing is compiled yet (a cache folder of
+    its own), from when it says it compiles the smoother's loops; killed on the way out if it
+    is still there."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    out = tmp_path / "out" / "f.csv"
+    command = [sys.executable, "-m", "altfuse", "-v", "fuse", str(SAMPLE_LOG), "-o", str(out)]
+    with (
+        sigint_handled(),
+        subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=env) as proc,
+    ):
+        try:
+            assert proc.stderr is not None
+            for line in proc.stderr:
+                if "compiling altfuse.fuse.smoother" in line:
+                    break
+            yield proc
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+
+
 @pytest.mark.parametrize(
     ("signum", "said"), [(signal.SIGTERM, "terminated"), (signal.SIGINT, "interrupted")]
 )
@@ -349,30 +372,8 @@ def test_a_signal_ends_a_first_run_while_it_compiles(
     Python cannot run a signal's handler): SIGTERM or SIGINT there ended ``altfuse fuse`` only
     when the compilation did, 18-25 s later. The watchdog ends it within GRACE_S, on one
     line, with the signal's exit code and no output."""
-    out = tmp_path / "out"
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))  # nothing compiled yet
-    with (
-        sigint_handled(),
-        subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "altfuse",
-                "-v",
-                "fuse",
-                str(SAMPLE_LOG),
-                "-o",
-                str(out / "f.csv"),
-            ],
-            stderr=subprocess.PIPE,
-            text=True,
-            env=env,
-        ) as proc,
-    ):
+    with compiling(tmp_path) as proc:
         assert proc.stderr is not None
-        for line in proc.stderr:  # the smoother's loops are being compiled
-            if "compiling altfuse.fuse.smoother" in line:
-                break
         sent = time.monotonic()
         proc.send_signal(signum)
         rest = proc.stderr.read()
@@ -380,6 +381,24 @@ def test_a_signal_ends_a_first_run_while_it_compiles(
     assert time.monotonic() - sent < GRACE_S + 5
     assert proc.returncode == 128 + signum
     assert rest.strip().splitlines()[-1] == f"altfuse: error: {said}"
+    out = tmp_path / "out"
+    assert not out.exists() or list(out.iterdir()) == []
+
+
+def test_a_signal_ends_a_run_whose_stderr_is_closed(tmp_path: Path) -> None:
+    """SIGTERM where nothing reads stderr any more (a job cancelled after its log's reader
+    went): the watchdog's line met the closed pipe, its thread died holding the lock that says
+    the process is ending, and the main thread, out of the compilation, waited on that lock
+    for ever (two such runs were found still there 20 minutes on). It ends within GRACE_S."""
+    with compiling(tmp_path) as proc:
+        assert proc.stderr is not None
+        proc.stderr.close()
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=60)
+    assert time.monotonic() - sent < GRACE_S + 5
+    assert proc.returncode == 128 + signal.SIGTERM
+    out = tmp_path / "out"
     assert not out.exists() or list(out.iterdir()) == []
 
 

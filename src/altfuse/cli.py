@@ -100,8 +100,10 @@ def _end_signalled(signum: int) -> NoReturn:
     "Exception ignored in ObjectRef.__del__", a second stderr line)."""
     ENDING.acquire()  # the handler's way out or the watchdog: one of them says it
     terminated = signum == signal.SIGTERM
-    click.echo(f"altfuse: error: {'terminated' if terminated else 'interrupted'}", err=True)
-    _exit(EXIT_TERMINATED if terminated else 128 + signal.SIGINT)
+    try:  # a stderr whose reader is gone raises; the other way out waits on ENDING for ever
+        click.echo(f"altfuse: error: {'terminated' if terminated else 'interrupted'}", err=True)
+    finally:
+        _exit(EXIT_TERMINATED if terminated else 128 + signal.SIGINT)
 
 
 def _exit(code: int) -> NoReturn:
