@@ -263,6 +263,35 @@ def test_only_altfuses_own_dead_temporaries_are_cleaned(tmp_path: Path) -> None:
     assert [alive.exists(), elsewhere.exists(), mine.exists()] == [True, True, True]
 
 
+def test_a_target_named_near_the_limit_is_written(tmp_path: Path) -> None:
+    """A temporary's name holds its target's: ``fuse -o`` to a name of 249 bytes was refused
+    ("File name too long") although the name itself is within the limit. Written, and written
+    over (the old file set aside meanwhile), the sidecar beside it (255 bytes); a killed run's
+    temporary for it is cleaned as any other."""
+    target = tmp_path / ("a" * 245 + ".csv")
+    stem = write.temp_stem(target.name)
+    stale = tmp_path / f"{TEMP_PREFIX}{write._HOST}-{dead_pid()}-{stem}.abcdefgh.tmp"
+    stale.write_text("x")
+    assert run("fuse", SAMPLE_LOG, "-o", target).exit_code == 0
+    assert run("fuse", SAMPLE_LOG, "-o", target, "--force").exit_code == 0
+    assert {p.name for p in tmp_path.iterdir()} == {target.name, f"{target.stem}.meta.json"}
+    assert target.read_text().startswith("time_s,")
+
+
+def test_a_long_names_temporary_stem_is_its_start_and_a_digest() -> None:
+    room = write.NAME_MAX - len(os.fsencode(f"{TEMP_PREFIX}{write._HOST}")) - write._TEMP_EXTRA
+    assert write.temp_stem("out.csv") == "out.csv"
+    fits = "x" * room
+    assert write.temp_stem(fits) == fits
+    long = "é" * room  # two bytes each: whole characters kept
+    stem = write.temp_stem(long)
+    assert len(os.fsencode(stem)) <= room
+    start, digest = stem.split("~")
+    assert set(start) == {"é"}
+    assert len(digest) == write._DIGEST
+    assert write.temp_stem(long) == stem != write.temp_stem(long[:-1] + "e")
+
+
 def test_what_windows_lacks_is_not_asked_of_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import glob
+import hashlib
 import io
 import json
 import os
@@ -258,6 +259,29 @@ Writer = Callable[[IO[Any]], None]
 #: same folder removes them). A user's own ``.*.tmp`` files are never touched.
 TEMP_PREFIX = ".altfuse-"
 _HOST = socket.gethostname().replace("-", "_") or "host"
+#: The longest file name [bytes] file systems take (Linux's NAME_MAX, and macOS's and Windows'
+#: in characters). A temporary's name holds its target's, and a target set aside while the
+#: others are renamed (:func:`_set_aside`) a temporary's: ``NAME`` stands in them as its start
+#: and a digest of it where they would be longer (a 249-byte ``NAME`` was refused, "File name
+#: too long", the target's own name within the limit).
+NAME_MAX = 255
+#: What the names add to ``NAME``: a process id of up to 7 digits, two "-", and mkstemp's
+#: ``.XXXXXXXX.tmp`` twice (the temporary's, then the set-aside's).
+_TEMP_EXTRA = 7 + 2 + 2 * len(".XXXXXXXX.tmp")
+_DIGEST = 8
+
+
+def temp_stem(name: str) -> str:
+    """``name`` as it stands in the names of its temporary files: itself, or where those would
+    be longer than NAME_MAX bytes, as much of its start as fits, "~" and the first _DIGEST hex
+    digits of its sha256 (the same for every run on this host: a killed run's are found)."""
+    room = NAME_MAX - len(os.fsencode(f"{TEMP_PREFIX}{_HOST}")) - _TEMP_EXTRA
+    encoded = os.fsencode(name)
+    if len(encoded) <= room:
+        return name
+    digest = hashlib.sha256(encoded).hexdigest()[:_DIGEST]
+    start = encoded[: max(room - _DIGEST - 1, 0)].decode(errors="ignore")  # whole characters
+    return f"{start}~{digest}"
 
 
 class OutputError(AltfuseError):
@@ -373,8 +397,9 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
         target = Path(os.path.realpath(target))  # a rename onto a link would replace the link
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
-            remove_stale_temporaries(target.parent, glob.escape(target.name))
-            prefix = f"{TEMP_PREFIX}{_HOST}-{os.getpid()}-{target.name}."
+            stem = temp_stem(target.name)
+            remove_stale_temporaries(target.parent, glob.escape(stem))
+            prefix = f"{TEMP_PREFIX}{_HOST}-{os.getpid()}-{stem}."
             fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=prefix, suffix=".tmp")
         except OSError as exc:
             raise _cannot(target, exc) from exc
