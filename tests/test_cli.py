@@ -548,6 +548,31 @@ def test_a_closed_standard_output_is_said(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
+    ("command", "written"),
+    [
+        (f"fuse '{SAMPLE_LOG}' -o f.csv", {"f.csv", "f.meta.json"}),
+        (f"batch '{SAMPLE_LOG}' -o out --jobs 1", {"out"}),
+        (f"evaluate '{SAMPLE_LOG}' -o e.json", {"e.json"}),
+        (f"info '{SAMPLE_LOG}'", set()),
+    ],
+    ids=["fuse", "batch", "evaluate", "info"],
+)
+def test_a_closed_standard_error_runs_the_command(
+    tmp_path: Path, command: str, written: set[str]
+) -> None:
+    """``2>&-`` (a daemon's or cron's job started with stderr closed): Python's sys.stderr is
+    None, and ``fuse`` and ``batch``, asking whether it is a terminal for their progress line,
+    ended in an internal error (exit 3) before writing anything. Nothing can be said there;
+    the command runs."""
+    closed = subprocess.run(
+        f"'{sys.executable}' -m altfuse {command} 2>&-",
+        shell=True, cwd=tmp_path, capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert closed.returncode == 0
+    assert {p.name for p in tmp_path.iterdir()} == written
+
+
+@pytest.mark.parametrize(
     "args",
     [
         ("fuse", SAMPLE_LOG, "-o", "x.csv", "--weights", "-"),

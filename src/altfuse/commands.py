@@ -366,12 +366,18 @@ class _ProgressLine(logging.Handler):
         super().close()
 
 
+def _stderr_is_terminal() -> bool:
+    """Whether stderr is a terminal: not where it is piped, nor where the process began with it
+    closed (``2>&-``, a daemon's job: Python's ``sys.stderr`` is None)."""
+    return sys.stderr is not None and sys.stderr.isatty()
+
+
 @contextlib.contextmanager
 def _progress_line() -> Iterator[None]:
     """A progress line while a run lasts, where stderr is a terminal and neither -v (its steps
     are lines then) nor -q asks otherwise; nothing when stderr is piped."""
     shown = logging.getLogger("altfuse").getEffectiveLevel() == logging.WARNING
-    if not (shown and sys.stderr.isatty()):
+    if not (shown and _stderr_is_terminal()):
         yield
         return
     logger, handler = logging.getLogger("altfuse.progress"), _ProgressLine()
@@ -510,7 +516,7 @@ class _Progress:
     """done / failed / remaining / ETA on one line of stderr, only when stderr is a terminal."""
 
     def __init__(self) -> None:
-        self.enabled = sys.stderr.isatty()
+        self.enabled = _stderr_is_terminal()
         self.started = time.monotonic()
         self.done = self.failed = 0
 
