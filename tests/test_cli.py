@@ -534,6 +534,23 @@ def test_o_dash_writes_the_csv_to_standard_output(
     assert (quiet.exit_code, quiet.stderr, quiet.stdout) == (0, "", piped.stdout)
 
 
+def test_an_end_of_input_within_a_command_is_an_error_not_an_interruption(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """click takes an EOFError for a prompt's Ctrl+D ("Aborted"); altfuse asks nothing, and a
+    library's EOFError (numba reading an empty cache file) ended the run as interrupted, exit
+    130, after an empty line."""
+
+    from altfuse import commands
+
+    def damaged(*_args: object) -> None:
+        raise EOFError("Ran out of input")
+
+    monkeypatch.setattr(commands, "fuse_to_files", damaged)
+    result = run("fuse", SAMPLE_LOG, "-o", tmp_path / "f.csv")
+    assert_one_line_error(result, 3, "internal error: EOFError: Ran out of input")
+
+
 def test_a_closed_standard_output_is_said(tmp_path: Path) -> None:
     """``-o - >&-``: Python's sys.stdout is None; an internal error before."""
     closed = subprocess.run(

@@ -20,7 +20,7 @@ import signal
 import sys
 import traceback
 import warnings
-from typing import Any, NoReturn
+from typing import Any, NoReturn, cast
 
 import click
 
@@ -114,6 +114,12 @@ def _exit(code: int) -> NoReturn:
     os._exit(code)
 
 
+class _EndOfInput(Exception):
+    """An EOFError out of a command (a library's, reading a damaged file): altfuse asks the
+    user nothing, so it is no Ctrl+D at a prompt, as click takes it ("interrupted", exit 130;
+    a damaged numba cache ended every run so)."""
+
+
 class _Cli(click.Group):
     """A group whose errors are one line each, whatever raised them, and whose commands are
     imported only when one is run."""
@@ -133,6 +139,12 @@ class _Cli(click.Group):
         with formatter.section("Commands"):
             formatter.write_dl(list(COMMANDS.items()))
 
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except EOFError as exc:  # click would take it for a prompt's Ctrl+D: "interrupted"
+            raise _EndOfInput from exc
+
     def main(self, *args: Any, **kwargs: Any) -> Any:
         kwargs["standalone_mode"] = False
         given = kwargs.pop("args", args[0] if args else None)
@@ -146,6 +158,8 @@ class _Cli(click.Group):
         except click.exceptions.NoArgsIsHelpError as exc:  # bare altfuse: the help, as --help
             click.echo(exc.ctx.get_help() if exc.ctx else exc.format_message())
             code = 0
+        except _EndOfInput as exc:
+            _fail_for(cast(EOFError, exc.__cause__), debug)
         except (click.exceptions.Abort, KeyboardInterrupt, Terminated) as exc:
             _fail_signalled(exc)
         except click.ClickException as exc:
