@@ -121,3 +121,70 @@ def test_a_temporary_cache_directory_is_used_only_when_no_one_else_can_write_it(
         mine.mkdir(mode=0o700)
         os.chown(mine, 65534, 65534)
         assert mine not in altfuse.compiled._cache_roots()
+
+
+def _thrice(x: float) -> float:
+    return 3.0 * x
+
+
+@pytest.fixture
+def users_cache(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> Iterator[None]:
+    """The loops kept under ``tmp_path`` (the install's ``__pycache__`` taken as unwritable),
+    and what the caches could not do said afresh."""
+    monkeypatch.setattr(altfuse.compiled._CONFIG, "CACHE_DIR", "")
+    monkeypatch.setattr(altfuse.compiled, "_writable", _unwritable("__pycache__"))
+    monkeypatch.setattr(altfuse.compiled, "_CACHE_FAILED", set(), raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    altfuse.compiled.cache_dir.cache_clear()
+    yield
+    altfuse.compiled.cache_dir.cache_clear()
+
+
+def _said(caplog: pytest.LogCaptureFixture) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+
+
+@pytest.mark.usefixtures("users_cache")
+def test_a_loop_that_cannot_be_kept_is_compiled_and_that_is_said(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A full disk, or a home over its quota (a cluster's, where a site install keeps the loops
+    in the user's cache): numba's saving raised, and every run failed ("the system refused:
+    No space left on device")."""
+
+    def full(*_args: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(numba.core.caching.IndexDataCacheFile, "_save_data", full)
+    assert compiled(_thrice)(2.0) == 6.0
+    assert compiled(_twice)(2.0) == 4.0  # a second loop: said once
+    (said,) = _said(caplog)
+    assert said.startswith("cannot keep altfuse's compiled loops in ")
+    assert said.endswith(
+        "(No space left on device): this run compiles them, and so will the next until that "
+        "can be written"
+    )
+
+
+@pytest.mark.usefixtures("users_cache")
+def test_a_damaged_index_is_compiled_again_and_kept_anew(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """An index file left empty (a power cut before the disk had it) made numba's loading
+    raise EOFError, which click took for a Ctrl+D: every run ended "interrupted"."""
+    first = compiled(_thrice)
+    assert first(2.0) == 6.0
+    indexes = list(Path(first.stats.cache_path).glob("*.nbi"))  # type: ignore[attr-defined]
+    assert indexes, "nothing cached"
+    for index in indexes:
+        index.write_bytes(b"")
+    again = compiled(_thrice)  # as the next process would
+    assert again(3.0) == 9.0
+    (said,) = _said(caplog)
+    assert said.startswith("cannot read altfuse's compiled loops in ")
+    assert said.endswith(
+        "(EOFError: Ran out of input): this run compiles them again and keeps them anew"
+    )
+    healed = compiled(_thrice)  # and the one after: loaded
+    assert healed(4.0) == 12.0
+    assert sum(healed.stats.cache_hits.values()) == 1  # type: ignore[attr-defined]

@@ -23,7 +23,8 @@ of altfuse's own, named after a digest of their package's sources (a loop compil
 another file's functions must not outlive a change to them), under ``NUMBA_CACHE_DIR`` where
 the user set it, else the user's cache directory, else the system's temporary one (a directory
 of the user's own, no one else's to write); with none writable they are compiled by each
-process, and that is said as a warning.
+process, and that is said as a warning. A cache that cannot be written after all (a full disk,
+a quota) or read (a damaged file) is said as well, and compiled around (:func:`_tolerant`).
 """
 
 from __future__ import annotations
@@ -42,6 +43,8 @@ from typing import Any, TypeVar, cast
 import numba
 from numba.core import event
 
+from altfuse.signals import interruption
+
 F = TypeVar("F", bound=Callable[..., Any])
 #: numba's settings (set from its environment variables at its import, untyped)
 _CONFIG: Any = numba.config
@@ -55,7 +58,81 @@ def compiled(function: F) -> F:
         _UNCACHED.add(function.__module__)
         return cast(F, numba.njit(nogil=True)(function))
     with _numba_cache_dir(directory):  # numba reads it once, when the function is decorated
-        return cast(F, numba.njit(cache=True, nogil=True)(function))
+        dispatcher = numba.njit(cache=True, nogil=True)(function)
+    _tolerant(getattr(dispatcher, "_cache", None))
+    return cast(F, dispatcher)
+
+
+def _tolerant(cache: Any) -> None:
+    """numba's ``cache`` of one loop made a saving of time and no more: a loop it cannot keep
+    (a full disk, a home over its quota: on Linux numba raises) is compiled by each run, and a
+    kept one it cannot read (an empty or damaged file) is compiled again, each said once per
+    process (:func:`_said`). Before, a full disk failed every run ("the system refused: No space
+    left on device"), and an empty index file every run after it ("interrupted", numba's
+    EOFError). A numba whose cache lacks these two methods keeps its own ways."""
+    load = getattr(cache, "load_overload", None)
+    save = getattr(cache, "save_overload", None)
+    if load is None or save is None:
+        return
+
+    def load_or_compile(sig: Any, target_context: Any) -> Any:
+        try:
+            return load(sig, target_context)
+        except Exception as exc:
+            if interruption(exc) is not None:  # a signal's, out of numba's callbacks
+                raise
+            _said("read", cache, exc)
+            if not isinstance(exc, OSError):  # read but damaged: numba reads the index to save
+                _forget_index(cache)
+            return None  # as if nothing were kept: numba compiles it, and keeps it anew
+
+    def save_or_say(sig: Any, data: Any) -> None:
+        try:
+            save(sig, data)
+        except Exception as exc:
+            if interruption(exc) is not None:
+                raise
+            _said("keep", cache, exc)
+
+    cache.load_overload = load_or_compile
+    cache.save_overload = save_or_say
+
+
+def _forget_index(cache: Any) -> None:
+    """Remove the index file of numba's ``cache`` (``_cache_file._index_path``, where this numba
+    has it): numba reads the index before it keeps anything, so a damaged one would stop every
+    later run from keeping the loop again."""
+    index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+    if isinstance(index, str):
+        with contextlib.suppress(OSError):
+            os.unlink(index)
+
+
+#: What a cache could not do, said once per process: "read", "keep".
+_CACHE_FAILED: set[str] = set()
+
+
+def _said(what: str, cache: Any, exc: Exception) -> None:
+    """Say once per process that the compiled loops in ``cache``'s folder could not be read
+    or kept (``what``), and why (``exc``)."""
+    if what in _CACHE_FAILED:
+        return
+    _CACHE_FAILED.add(what)
+    why = (
+        exc.strerror
+        if isinstance(exc, OSError) and exc.strerror
+        else f"{type(exc).__name__}: {exc}"
+    )
+    where = getattr(cache, "cache_path", None) or "numba's cache"
+    logging.getLogger("altfuse").warning(
+        "cannot %s altfuse's compiled loops in %s (%s): %s",
+        what,
+        where,
+        why,
+        "this run compiles them again and keeps them anew"
+        if what == "read"
+        else "this run compiles them, and so will the next until that can be written",
+    )
 
 
 @functools.cache
