@@ -1,7 +1,7 @@
 """Outputs under attack (issue 16): a run never writes onto its input or twice onto one file,
 commits all of its files or none, reports a failed write in one line, honours the umask, and
-cleans only its own temporary files, on SIGINT and SIGTERM alike; a batch's outputs and summary
-likewise."""
+cleans only its own temporary files, on SIGINT, SIGTERM and SIGHUP alike; a batch's outputs and
+summary likewise."""
 
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
@@ -30,7 +31,7 @@ from altfuse import write
 from altfuse.batch import BatchOptions, LogResult, run_batch, write_summary
 from altfuse.cli import cli
 from altfuse.errors import ParameterError
-from altfuse.signals import GRACE_S, Terminated, raise_on_sigterm
+from altfuse.signals import GRACE_S, SIGHUP, Terminated, raise_on_termination
 from altfuse.write import TEMP_PREFIX, OutputError, atomic_outputs
 from conftest import SAMPLE_LOG
 from test_cli import assert_one_line_error, sha
@@ -316,56 +317,159 @@ def test_what_windows_lacks_is_not_asked_of_it(
         assert (tmp_path / "out").is_dir()
 
 
-def test_sigterm_removes_the_temporaries(tmp_path: Path) -> None:
+#: The signals that end a run as SIGTERM does (SIGHUP: none on Windows).
+TERMINATING = [signal.SIGTERM, *([SIGHUP] if SIGHUP is not None else [])]
+SAID = {signal.SIGTERM: "terminated", signal.SIGINT: "interrupted", SIGHUP: "hung up"}
+
+
+@contextlib.contextmanager
+def handled_as(signum: int, handler: Any) -> Iterator[None]:
+    """``signum``'s handler in this process is ``handler`` meanwhile (a program started here
+    inherits SIG_DFL or SIG_IGN)."""
+    before = signal.signal(signum, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signum, before)
+
+
+@contextlib.contextmanager
+def as_from_a_terminal() -> Iterator[None]:
+    """SIGINT handled and SIGHUP at its default in this process meanwhile, so that a program
+    started here gets both at their defaults, as from a terminal: a shell starts a job in the
+    background (``pytest &``) with SIGINT ignored, ``nohup pytest`` ignores SIGHUP, a program
+    inherits that, and Python then leaves it ignored (altfuse too, as ``nohup`` means it)."""
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(handled_as(signal.SIGINT, signal.default_int_handler))
+        if SIGHUP is not None:
+            stack.enter_context(handled_as(SIGHUP, signal.SIG_DFL))
+        yield
+
+
+@pytest.mark.parametrize("signum", TERMINATING)
+def test_a_terminating_signal_removes_the_temporaries(tmp_path: Path, signum: int) -> None:
     def interrupted() -> None:
         with atomic_outputs() as stage:
             stage(tmp_path / "a.csv", lambda f: f.write("a"))
-            stage(tmp_path / "b.csv", lambda _: os.kill(os.getpid(), signal.SIGTERM))
+            stage(tmp_path / "b.csv", lambda _: os.kill(os.getpid(), signum))
 
-    raise_on_sigterm()
-    try:
-        with pytest.raises(Terminated):
+    with handled_as(signal.SIGTERM, signal.SIG_DFL), handled_as(signum, signal.SIG_DFL):
+        raise_on_termination()
+        with pytest.raises(Terminated) as raised:
             interrupted()
-    finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    assert raised.value.signum == signum
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/maps")
-def test_sigterm_to_the_command_is_one_line(tmp_path: Path) -> None:
+def signalling_at(monkeypatch: pytest.MonkeyPatch, name: str, call: int = 1) -> None:
+    """``os.<name>`` sends this process SIGTERM at its ``call``-th call, just before it does
+    its work."""
+    original = getattr(os, name)
+    calls: list[object] = []
+
+    def signalled(*args: Any) -> Any:
+        calls.append(args)
+        if len(calls) == call:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return original(*args)
+
+    monkeypatch.setattr(os, name, signalled)
+
+
+def test_a_second_signal_does_not_cut_the_removal_short(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A signal while the temporaries are being removed (a batch's worker gets the closed
+    terminal's SIGHUP, then the SIGTERM its dead parent sends) had ended the removal, leaving
+    a temporary file: it waits until they are gone, and the first signal ends the run."""
+
+    def interrupted() -> None:
+        with atomic_outputs() as stage:
+            stage(tmp_path / "a.csv", lambda f: f.write("a"))
+            signalling_at(monkeypatch, "unlink")
+            stage(tmp_path / "b.csv", lambda _: os.kill(os.getpid(), signal.SIGTERM))
+
+    with handled_as(signal.SIGTERM, signal.SIG_DFL):
+        raise_on_termination()
+        with pytest.raises(Terminated):
+            interrupted()
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("call", [1, 2, 3])
+def test_a_signal_while_the_outputs_are_renamed_leaves_them_all(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, call: int
+) -> None:
+    """All or none: a signal between two renames (1: a.csv's, 2: setting the old b.csv
+    aside, 3: b.csv's) had left the new a.csv beside the old b.csv, or beside none (the old
+    one set aside under a temporary name); the renames finish, then the signal ends the run."""
+    (tmp_path / "b.csv").write_text("before")
+
+    def committed() -> None:
+        with atomic_outputs() as stage:
+            stage(tmp_path / "a.csv", lambda f: f.write("a"))
+            stage(tmp_path / "b.csv", lambda f: f.write("b"))
+            signalling_at(monkeypatch, "replace", call)
+
+    with handled_as(signal.SIGTERM, signal.SIG_DFL):
+        raise_on_termination()
+        with pytest.raises(Terminated):
+            committed()
+    assert {p.name: p.read_text() for p in tmp_path.iterdir()} == {"a.csv": "a", "b.csv": "b"}
+
+
+def fuse_of_a_long_log(
+    tmp_path: Path, hangup: Any = signal.SIG_DFL
+) -> tuple[subprocess.Popen[str], Path]:
+    """``altfuse fuse`` of a 900 s flight, started as from a terminal with SIGHUP's handler
+    ``hangup``, once it has mapped the log (past start-up, reading), and its output's
+    folder."""
     log = tmp_path / "long.bin"
     assert run("simulate", "hover", "-o", log, "--duration", "900").exit_code == 0
     out = tmp_path / "out"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "altfuse", "fuse", str(log), "-o", str(out / "f.csv")],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(as_from_a_terminal())
+        if SIGHUP is not None:
+            stack.enter_context(handled_as(SIGHUP, hangup))
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "altfuse", "fuse", str(log), "-o", str(out / "f.csv")],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
     maps = Path(f"/proc/{proc.pid}/maps")
     deadline = time.monotonic() + 60
-    # the log mapped: past start-up, reading
     while proc.poll() is None and time.monotonic() < deadline and str(log) not in maps.read_text():
         time.sleep(0.005)
-    proc.send_signal(signal.SIGTERM)
+    return proc, out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/maps")
+@pytest.mark.parametrize("signum", TERMINATING)
+def test_a_terminating_signal_to_the_command_is_one_line(tmp_path: Path, signum: int) -> None:
+    """SIGTERM, or SIGHUP (a closed terminal, a dropped SSH session), ends a run on one line,
+    with 128 + the signal and no file (SIGHUP's default had left the temporary file being
+    written)."""
+    proc, out = fuse_of_a_long_log(tmp_path)
+    proc.send_signal(signum)
     _, stderr = proc.communicate(timeout=60)
-    assert proc.returncode == 128 + signal.SIGTERM, stderr
-    assert stderr.strip() == "altfuse: error: terminated"
+    assert proc.returncode == 128 + signum, stderr
+    assert stderr.strip() == f"altfuse: error: {SAID[signum]}"
     assert temporaries(tmp_path) == []
     assert not out.exists() or list(out.iterdir()) == []
 
 
-@contextlib.contextmanager
-def sigint_handled() -> Iterator[None]:
-    """SIGINT handled in this process meanwhile, so that a program started here gets it at its
-    default, as from a terminal: a shell starts a job in the background (``pytest &``) with
-    SIGINT ignored, a program inherits that, and Python then leaves it ignored (altfuse too,
-    as ``nohup`` means it to be)."""
-    before = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, before)
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/maps")
+@pytest.mark.skipif(SIGHUP is None, reason="no SIGHUP")
+def test_a_run_started_with_hangups_ignored_outlives_its_terminal(tmp_path: Path) -> None:
+    """``nohup altfuse ...``: SIGHUP stays ignored, and the run finishes."""
+    assert SIGHUP is not None
+    proc, out = fuse_of_a_long_log(tmp_path, signal.SIG_IGN)
+    proc.send_signal(SIGHUP)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr
+    assert "error" not in stderr
+    assert sorted(p.name for p in out.iterdir()) == ["f.csv", "f.meta.json"]
 
 
 @contextlib.contextmanager
@@ -377,7 +481,7 @@ def compiling(tmp_path: Path) -> Iterator[subprocess.Popen[str]]:
     out = tmp_path / "out" / "f.csv"
     command = [sys.executable, "-m", "altfuse", "-v", "fuse", str(SAMPLE_LOG), "-o", str(out)]
     with (
-        sigint_handled(),
+        as_from_a_terminal(),
         subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=env) as proc,
     ):
         try:
@@ -391,12 +495,8 @@ def compiling(tmp_path: Path) -> Iterator[subprocess.Popen[str]]:
                 proc.kill()
 
 
-@pytest.mark.parametrize(
-    ("signum", "said"), [(signal.SIGTERM, "terminated"), (signal.SIGINT, "interrupted")]
-)
-def test_a_signal_ends_a_first_run_while_it_compiles(
-    tmp_path: Path, signum: int, said: str
-) -> None:
+@pytest.mark.parametrize("signum", [*TERMINATING, signal.SIGINT])
+def test_a_signal_ends_a_first_run_while_it_compiles(tmp_path: Path, signum: int) -> None:
     """A first run compiles the loops (numba: LLVM's C++ for seconds at a time, in which
     Python cannot run a signal's handler): SIGTERM or SIGINT there ended ``altfuse fuse`` only
     when the compilation did, 18-25 s later. The watchdog ends it within GRACE_S, on one
@@ -409,7 +509,7 @@ def test_a_signal_ends_a_first_run_while_it_compiles(
         proc.wait(timeout=60)
     assert time.monotonic() - sent < GRACE_S + 5
     assert proc.returncode == 128 + signum
-    assert rest.strip().splitlines()[-1] == f"altfuse: error: {said}"
+    assert rest.strip().splitlines()[-1] == f"altfuse: error: {SAID[signum]}"
     out = tmp_path / "out"
     assert not out.exists() or list(out.iterdir()) == []
 
@@ -536,6 +636,52 @@ def children(pid: int) -> set[int]:
     return found
 
 
+def still_running(pids: set[int], within_s: float = 10) -> list[int]:
+    """Those of ``pids`` still running ``within_s`` on (a zombie, not yet reaped by init, is
+    gone too; a live process has /proc/PID/status "State: R/S")."""
+    deadline = time.monotonic() + within_s
+    while any(Path(f"/proc/{p}").exists() for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return [p for p in pids if _alive(p)]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return "zombie" not in Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:  # gone
+        return False
+
+
+@pytest.mark.skipif(SIGHUP is None, reason="no SIGHUP")
+def test_a_batch_whose_terminal_closes_ends_clean(tmp_path: Path) -> None:
+    """A closed terminal sends SIGHUP to the batch and its workers alike (one process group):
+    the workers remove the temporary files of their logs, the batch says so on one line and
+    exits 129, no worker is left."""
+    assert SIGHUP is not None
+    log = tmp_path / "long.bin"
+    assert run("simulate", "hover", "-o", log, "--duration", "900").exit_code == 0
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for i in range(4):
+        shutil.copy(log, logs / f"{i}.bin")
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "altfuse", "batch", str(logs), "-o", str(out), "-j", "2"]
+    with as_from_a_terminal():
+        proc = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 60
+    workers: set[int] = set()
+    while not temporaries(tmp_path) and time.monotonic() < deadline and proc.poll() is None:
+        workers |= children(proc.pid)
+        time.sleep(0.002)
+    assert workers, "no workers seen"
+    os.killpg(proc.pid, SIGHUP)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + SIGHUP, stderr
+    assert stderr.strip() == "altfuse: error: hung up"
+    assert still_running(workers) == []
+    assert temporaries(tmp_path) == []
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
 @pytest.mark.parametrize("cache", ["warm", "cold"])
 def test_batch_workers_die_with_their_parent(tmp_path: Path, cache: str) -> None:
@@ -555,13 +701,7 @@ def test_batch_workers_die_with_their_parent(tmp_path: Path, cache: str) -> None
     assert len(workers) >= 2, "no workers seen"
     proc.kill()
     proc.wait()
-    deadline = time.monotonic() + 10
-    while any(Path(f"/proc/{w}").exists() for w in workers) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    # a zombie reaped by init is gone too; a live worker has /proc/PID/status "State: R/S"
-    alive = [w for w in workers if Path(f"/proc/{w}").exists()
-             and "zombie" not in Path(f"/proc/{w}/status").read_text()]  # fmt: skip
-    assert alive == []
+    assert still_running(workers) == []
 
 
 def test_a_python_warning_is_never_a_second_stderr_line(

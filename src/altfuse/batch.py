@@ -47,7 +47,13 @@ from altfuse.job import FileRun, Outputs, fuse_to_files
 from altfuse.memory import one_heap
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
-from altfuse.signals import EXIT_TERMINATED, Terminated, interruption, watch_signals
+from altfuse.signals import (
+    EXIT_TERMINATED,
+    Terminated,
+    interruption,
+    raise_on_termination,
+    watch_signals,
+)
 from altfuse.write import (
     TableFormat,
     atomic_outputs,
@@ -405,7 +411,7 @@ def process(job: Job, options: BatchOptions) -> LogResult:
 
 @dataclass
 class _WorkerState:
-    """What a worker process's SIGTERM handler needs to know."""
+    """What a worker process's SIGTERM (and SIGHUP) handler needs to know."""
 
     running: bool = False  # a log is being processed
     terminating: bool = False  # SIGTERM came (its exception can be lost in a C callback)
@@ -416,6 +422,8 @@ _worker = _WorkerState()
 
 
 def _worker_signal(_signum: int, _frame: object) -> None:
+    if _worker.terminating:  # ending already (SIGHUP, then the SIGTERM of a parent gone)
+        return
     _worker.terminating = True
     if _worker.running:
         raise Terminated  # out through atomic_outputs, which removes its temporary files
@@ -429,7 +437,8 @@ def _worker_end(_signum: int) -> NoReturn:
 def _worker_start(parent: int, started: Any) -> None:
     """In each worker process: SIGTERM ends it, removing the temporary files of the log in
     hand (or, where its exception cannot, the watchdog ends it after a grace:
-    :func:`altfuse.signals.watch_signals`), and on Linux the worker is sent SIGTERM when its
+    :func:`altfuse.signals.watch_signals`), as SIGHUP does (a closed terminal sends it to the
+    workers as to the batch), and on Linux the worker is sent SIGTERM when its
     parent dies (``PR_SET_PDEATHSIG``), so that a killed batch does not leave workers writing
     on. ``started`` is the queue on which it says which job it starts. Each worker computes on
     one thread (a BLAS pool forked from a parent that loaded numpy would spin beside the other
@@ -438,7 +447,7 @@ def _worker_start(parent: int, started: Any) -> None:
     one_heap()
     _worker.started = started
     threadpool_limits(1)
-    signal.signal(signal.SIGTERM, _worker_signal)
+    raise_on_termination(_worker_signal)
     watch_signals(_worker_end)
     if sys.platform.startswith("linux"):
         with contextlib.suppress(OSError, AttributeError):

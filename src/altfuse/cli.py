@@ -30,10 +30,10 @@ from altfuse.memory import one_heap
 from altfuse.params import InvalidParameter
 from altfuse.signals import (
     ENDING,
-    EXIT_TERMINATED,
+    SIGHUP,
     Terminated,
     interruption,
-    raise_on_sigterm,
+    raise_on_termination,
     watch_signals,
 )
 
@@ -89,21 +89,22 @@ def _log_warning(
 def _fail_signalled(exc: BaseException | None) -> None:
     """Exit as a signal asks when ``exc`` is one (:func:`_end_signalled`)."""
     if exc is not None:
-        _end_signalled(signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+        _end_signalled(exc.signum if isinstance(exc, Terminated) else signal.SIGINT)
 
 
 def _end_signalled(signum: int) -> NoReturn:
-    """Exit as the signal ``signum`` asks (SIGTERM: 143, SIGINT: 130), at once, saying so on one
-    line: the temporary files are gone (removed on the way here, or never made where the
-    watchdog calls this: :func:`altfuse.signals.watch_signals`), and the interpreter's shutdown
-    would run the destructors of what the signal cut short (llvmlite's, in a compilation:
-    "Exception ignored in ObjectRef.__del__", a second stderr line)."""
+    """Exit as the signal ``signum`` asks (128 + the signal: SIGINT 130, SIGTERM 143, SIGHUP
+    129), at once, saying so on one line: the temporary files are gone (removed on the way
+    here, or never made where the watchdog calls this: :func:`altfuse.signals.watch_signals`),
+    and the interpreter's shutdown would run the destructors of what the signal cut short
+    (llvmlite's, in a compilation: "Exception ignored in ObjectRef.__del__", a second stderr
+    line)."""
     ENDING.acquire()  # the handler's way out or the watchdog: one of them says it
-    terminated = signum == signal.SIGTERM
+    said = {signal.SIGINT: "interrupted", SIGHUP: "hung up"}.get(signum, "terminated")
     try:  # a stderr whose reader is gone raises; the other way out waits on ENDING for ever
-        click.echo(f"altfuse: error: {'terminated' if terminated else 'interrupted'}", err=True)
+        click.echo(f"altfuse: error: {said}", err=True)
     finally:
-        _exit(EXIT_TERMINATED if terminated else 128 + signal.SIGINT)
+        _exit(128 + signum)
 
 
 def _exit(code: int) -> NoReturn:
@@ -261,7 +262,7 @@ def main() -> None:
     atexit.register(_exit_now)
     for name in THREAD_POOLS:  # before numpy is loaded: it sizes its pool then
         os.environ.setdefault(name, "1")
-    raise_on_sigterm()
+    raise_on_termination()
     watch_signals(_end_signalled)
     try:
         cli()

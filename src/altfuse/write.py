@@ -3,7 +3,7 @@
 Every file is written to a temporary file beside its target and renamed into place only when all
 of them are complete, all or none, so a failure never leaves a half-written output or an output
 without its sidecar behind; no output may be an input of the run or another of its outputs
-(:func:`check_paths`); SIGTERM, like SIGINT, removes the temporary files
+(:func:`check_paths`); SIGTERM and SIGHUP, like SIGINT, remove the temporary files
 (:class:`altfuse.signals.Terminated`). A target that is a symbolic link stays one: its file is
 written. A target that exists and is no regular file (``/dev/null``, a named pipe,
 ``/dev/stdout``: :func:`altfuse.files.is_stream`) is written into once the files are in place,
@@ -32,6 +32,7 @@ import numpy.typing as npt
 
 from altfuse.errors import AltfuseError, ParameterError
 from altfuse.files import COMPRESSIONS, compression_named, is_stream
+from altfuse.signals import signals_held
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -400,10 +401,11 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
             stem = temp_stem(target.name)
             remove_stale_temporaries(target.parent, glob.escape(stem))
             prefix = f"{TEMP_PREFIX}{_HOST}-{os.getpid()}-{stem}."
-            fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=prefix, suffix=".tmp")
+            with signals_held():  # a file made is a file recorded for removal
+                fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=prefix, suffix=".tmp")
+                staged.append((tmp, target))
         except OSError as exc:
             raise _cannot(target, exc) from exc
-        staged.append((tmp, target))
         try:
             if hasattr(os, "fchmod"):  # not on Windows before Python 3.13: no such bits there
                 os.fchmod(fd, mode)
@@ -413,11 +415,13 @@ def atomic_outputs() -> Iterator[Callable[..., None]]:
 
     try:
         yield stage
-        _commit(staged)
+        with signals_held():  # all renamed or none
+            _commit(staged)
     except BaseException:
-        for tmp, _ in staged:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
+        with signals_held():
+            for tmp, _ in staged:
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp)
         raise
     for target, write, binary in streams:
         try:
