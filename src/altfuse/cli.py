@@ -42,8 +42,8 @@ EXIT_BUG = 3
 EXIT_CODES = (
     "Exit codes: 0 done; 1 the log cannot be processed (missing, damaged beyond reading, too few "
     "altitude sources), an output cannot be written, the system refuses a file or memory runs "
-    "out; 2 a usage or parameter error; 3 a bug (--debug shows it); 130 interrupted, 143 "
-    "terminated."
+    "out; 2 a usage or parameter error; 3 a bug (--debug shows it); 129 hung up, 130 "
+    "interrupted, 143 terminated."
 )
 #: The group's options, taken after the command too (``altfuse fuse in.bin -o x.csv -v``).
 GLOBAL_FLAGS = frozenset({"-v", "-vv", "-vvv", "--verbose", "-q", "--quiet", "--debug"})
