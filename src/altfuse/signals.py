@@ -13,6 +13,10 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from signal import _HANDLER  # typeshed's: what signal.signal takes and returns
 
 #: The exit code after SIGTERM (128 + the signal, as a shell reports it).
 EXIT_TERMINATED = 128 + signal.SIGTERM
@@ -73,12 +77,11 @@ def signals_held() -> Iterator[None]:
         yield
         return
     came: list[int] = []
-    before = {
-        signum: signal.signal(signum, lambda received, _frame: came.append(received))
-        for signum in ENDING_SIGNALS
-        if callable(signal.getsignal(signum))  # not where ignored or at its default
-    }
-    try:
+    before: dict[int, _HANDLER] = {}
+    try:  # each handler put back, also where a signal comes while they are swapped
+        for signum in ENDING_SIGNALS:
+            if callable(signal.getsignal(signum)):  # not where ignored or at its default
+                before[signum] = signal.signal(signum, lambda got, _frame: came.append(got))
         yield
     finally:
         for signum, handler in before.items():
