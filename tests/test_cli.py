@@ -446,6 +446,45 @@ def test_a_progress_line_on_a_terminal_only(monkeypatch: pytest.MonkeyPatch) -> 
     assert logging.getLogger("altfuse.progress").handlers == []
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="a pseudo-terminal")
+@pytest.mark.parametrize("command", ["fuse", "batch"])
+def test_a_run_outlives_its_terminal(tmp_path: Path, command: str) -> None:
+    """A job left running when its shell exited (``altfuse batch ... &``, then ``exit``: no
+    SIGHUP) writes its progress line into a hung-up terminal, which fails (EIO): that had ended
+    ``fuse`` without its outputs, and a batch, its workers finishing every log, without its
+    summary, exit 1. The run goes on without the line."""
+    import pty
+    import shutil
+
+    logs = tmp_path / "logs"
+    long = ["simulate", "hover", "-o", str(logs / "a.bin"), "--duration", "900"]
+    assert CliRunner().invoke(cli, long).exit_code == 0
+    out = tmp_path / "out"
+    if command == "fuse":
+        args = ["fuse", str(logs / "a.bin"), "-o", str(out / "a.csv")]
+        expected = ["a.csv", "a.meta.json"]
+    else:
+        for copy in ("b.bin", "c.bin"):
+            shutil.copy(logs / "a.bin", logs / copy)
+        args = ["batch", str(logs), "-o", str(out), "-j", "1"]
+        expected = [f"{s}.{x}" for s in "abc" for x in ("csv", "meta.json")]
+        expected += ["index.json", "summary.csv"]
+    primary, secondary = pty.openpty()
+    with subprocess.Popen(
+        [sys.executable, "-m", "altfuse", *args],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=secondary,
+        text=True,
+    ) as proc:
+        os.close(secondary)
+        assert os.read(primary, 200)  # the progress line began: a terminal
+        os.close(primary)  # which hangs up
+        stdout, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stdout
+    assert sorted(p.name for p in out.iterdir()) == expected
+
+
 POOLS = """
 import sys
 from altfuse import cli

@@ -353,16 +353,20 @@ def fuse(
 
 class _ProgressLine(logging.Handler):
     """The run's latest step on one line of stderr, overwritten by the next and cleared at the
-    end (``altfuse.progress`` messages)."""
+    end (``altfuse.progress`` messages); none after the terminal is gone (:func:`_on_terminal`)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.shown = True
 
     def emit(self, record: logging.LogRecord) -> None:
-        text = f"altfuse: {record.getMessage()} ..."[: shutil.get_terminal_size().columns - 1]
-        sys.stderr.write(f"\r\033[K{text}")
-        sys.stderr.flush()
+        if self.shown:
+            text = f"altfuse: {record.getMessage()} ..."[: shutil.get_terminal_size().columns - 1]
+            self.shown = _on_terminal(f"\r\033[K{text}")
 
     def close(self) -> None:
-        sys.stderr.write("\r\033[K")
-        sys.stderr.flush()
+        if self.shown:
+            _on_terminal("\r\033[K")
         super().close()
 
 
@@ -370,6 +374,20 @@ def _stderr_is_terminal() -> bool:
     """Whether stderr is a terminal: not where it is piped, nor where the process began with it
     closed (``2>&-``, a daemon's job: Python's ``sys.stderr`` is None)."""
     return sys.stderr is not None and sys.stderr.isatty()
+
+
+def _on_terminal(text: str) -> bool:
+    """Write a progress ``text`` to stderr, a terminal, at once; False where the terminal is
+    gone. A job left running when its shell exited (``altfuse batch ... &``, then ``exit``: no
+    SIGHUP) writes into a hung-up terminal, which fails (EIO): the progress line had ended the
+    run there, a batch without its summary (its workers finishing every log) and a ``fuse``
+    without its outputs, exit 1. Progress is no reason to stop."""
+    try:
+        sys.stderr.write(text)
+        sys.stderr.flush()
+    except OSError:
+        return False
+    return True
 
 
 @contextlib.contextmanager
@@ -513,7 +531,8 @@ def _verdicts(result: Evaluation) -> list[str]:
 
 
 class _Progress:
-    """done / failed / remaining / ETA on one line of stderr, only when stderr is a terminal."""
+    """done / failed / remaining / ETA on one line of stderr, only when stderr is a terminal
+    (and while it is there: :func:`_on_terminal`)."""
 
     def __init__(self) -> None:
         self.enabled = _stderr_is_terminal()
@@ -528,11 +547,9 @@ class _Progress:
         elapsed = time.monotonic() - self.started
         left = total - self.done
         eta = elapsed / self.done * left
-        click.echo(
+        self.enabled = _on_terminal(
             f"\rdone {self.done}/{total}, failed {self.failed}, remaining {left}, "
-            f"ETA {int(eta) // 60}:{int(eta) % 60:02d}  ",
-            err=True,
-            nl=left == 0,
+            f"ETA {int(eta) // 60}:{int(eta) % 60:02d}  " + ("\n" if left == 0 else "")
         )
 
 
