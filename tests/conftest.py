@@ -86,6 +86,20 @@ def _altfuse_logger_restored() -> Iterator[None]:
     logger.handlers[:], logger.level, logger.propagate = kept
 
 
+@pytest.fixture(scope="session")
+def long_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 900 s hover written by ``altfuse simulate``, once per session: the input of runs long
+    enough to be signalled or hung up midway (altfuse never writes to its input)."""
+    from click.testing import CliRunner
+
+    from altfuse.cli import cli
+
+    log = tmp_path_factory.mktemp("long") / "long.bin"
+    result = CliRunner().invoke(cli, ["simulate", "hover", "-o", str(log), "--duration", "900"])
+    assert result.exit_code == 0, result.output
+    return log
+
+
 @pytest.fixture
 def paper_a() -> PaperAFlight:
     return paper_a_flight()

@@ -448,7 +448,7 @@ def test_a_progress_line_on_a_terminal_only(monkeypatch: pytest.MonkeyPatch) -> 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="a pseudo-terminal")
 @pytest.mark.parametrize("command", ["fuse", "batch"])
-def test_a_run_outlives_its_terminal(tmp_path: Path, command: str) -> None:
+def test_a_run_outlives_its_terminal(long_log: Path, tmp_path: Path, command: str) -> None:
     """A job left running when its shell exited (``altfuse batch ... &``, then ``exit``: no
     SIGHUP) writes its progress line into a hung-up terminal, which fails (EIO): that had ended
     ``fuse`` without its outputs, and a batch, its workers finishing every log, without its
@@ -456,16 +456,15 @@ def test_a_run_outlives_its_terminal(tmp_path: Path, command: str) -> None:
     import pty
     import shutil
 
-    logs = tmp_path / "logs"
-    long = ["simulate", "hover", "-o", str(logs / "a.bin"), "--duration", "900"]
-    assert CliRunner().invoke(cli, long).exit_code == 0
     out = tmp_path / "out"
     if command == "fuse":
-        args = ["fuse", str(logs / "a.bin"), "-o", str(out / "a.csv")]
+        args = ["fuse", str(long_log), "-o", str(out / "a.csv")]
         expected = ["a.csv", "a.meta.json"]
     else:
-        for copy in ("b.bin", "c.bin"):
-            shutil.copy(logs / "a.bin", logs / copy)
+        logs = tmp_path / "logs"
+        logs.mkdir()
+        for copy in ("a.bin", "b.bin", "c.bin"):
+            shutil.copy(long_log, logs / copy)
         args = ["batch", str(logs), "-o", str(out), "-j", "1"]
         expected = [f"{s}.{x}" for s in "abc" for x in ("csv", "meta.json")]
         expected += ["index.json", "summary.csv"]

@@ -419,13 +419,11 @@ def test_a_signal_while_the_outputs_are_renamed_leaves_them_all(
 
 
 def fuse_of_a_long_log(
-    tmp_path: Path, hangup: Any = signal.SIG_DFL
+    log: Path, tmp_path: Path, hangup: Any = signal.SIG_DFL
 ) -> tuple[subprocess.Popen[str], Path]:
-    """``altfuse fuse`` of a 900 s flight, started as from a terminal with SIGHUP's handler
-    ``hangup``, once it has mapped the log (past start-up, reading), and its output's
-    folder."""
-    log = tmp_path / "long.bin"
-    assert run("simulate", "hover", "-o", log, "--duration", "900").exit_code == 0
+    """``altfuse fuse`` of the 900 s flight ``log`` into ``tmp_path``, started as from a
+    terminal with SIGHUP's handler ``hangup``, once it has mapped the log (past start-up,
+    reading), and its output's folder."""
     out = tmp_path / "out"
     with contextlib.ExitStack() as stack:
         stack.enter_context(as_from_a_terminal())
@@ -446,11 +444,13 @@ def fuse_of_a_long_log(
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/maps")
 @pytest.mark.parametrize("signum", TERMINATING)
-def test_a_terminating_signal_to_the_command_is_one_line(tmp_path: Path, signum: int) -> None:
+def test_a_terminating_signal_to_the_command_is_one_line(
+    long_log: Path, tmp_path: Path, signum: int
+) -> None:
     """SIGTERM, or SIGHUP (a closed terminal, a dropped SSH session), ends a run on one line,
     with 128 + the signal and no file (SIGHUP's default had left the temporary file being
     written)."""
-    proc, out = fuse_of_a_long_log(tmp_path)
+    proc, out = fuse_of_a_long_log(long_log, tmp_path)
     proc.send_signal(signum)
     _, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 128 + signum, stderr
@@ -461,10 +461,12 @@ def test_a_terminating_signal_to_the_command_is_one_line(tmp_path: Path, signum:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/maps")
 @pytest.mark.skipif(SIGHUP is None, reason="no SIGHUP")
-def test_a_run_started_with_hangups_ignored_outlives_its_terminal(tmp_path: Path) -> None:
+def test_a_run_started_with_hangups_ignored_outlives_its_terminal(
+    long_log: Path, tmp_path: Path
+) -> None:
     """``nohup altfuse ...``: SIGHUP stays ignored, and the run finishes."""
     assert SIGHUP is not None
-    proc, out = fuse_of_a_long_log(tmp_path, signal.SIG_IGN)
+    proc, out = fuse_of_a_long_log(long_log, tmp_path, signal.SIG_IGN)
     proc.send_signal(SIGHUP)
     _, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 0, stderr
@@ -653,17 +655,15 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.skipif(SIGHUP is None, reason="no SIGHUP")
-def test_a_batch_whose_terminal_closes_ends_clean(tmp_path: Path) -> None:
+def test_a_batch_whose_terminal_closes_ends_clean(long_log: Path, tmp_path: Path) -> None:
     """A closed terminal sends SIGHUP to the batch and its workers alike (one process group):
     the workers remove the temporary files of their logs, the batch says so on one line and
     exits 129, no worker is left."""
     assert SIGHUP is not None
-    log = tmp_path / "long.bin"
-    assert run("simulate", "hover", "-o", log, "--duration", "900").exit_code == 0
     logs = tmp_path / "logs"
     logs.mkdir()
     for i in range(4):
-        shutil.copy(log, logs / f"{i}.bin")
+        shutil.copy(long_log, logs / f"{i}.bin")
     out = tmp_path / "out"
     command = [sys.executable, "-m", "altfuse", "batch", str(logs), "-o", str(out), "-j", "2"]
     with as_from_a_terminal():
