@@ -161,6 +161,28 @@ def test_a_folder_that_cannot_be_listed_is_said(
     ]
 
 
+def test_what_is_no_file_is_said_not_waited_on(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A link to nothing (a sync cut short) and a named pipe named as logs are warned of, one
+    line each, and left out (passed over in silence before); named themselves, refused for
+    what they are (before: "no such file or folder")."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "a.bin").write_bytes(b"x")
+    (logs / "gone.bin").symlink_to(tmp_path / "nowhere.bin")
+    os.mkfifo(logs / "pipe.bin")
+    os.mkfifo(logs / "pipe.txt")  # not a log's name: not looked at
+    assert [str(rel) for _, rel in find_logs([logs])] == ["a.bin"]
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{logs / 'gone.bin'}: a link to nothing: not in this batch",
+        f"{logs / 'pipe.bin'}: a pipe: not in this batch",
+    ]
+    for name, kind in (("gone.bin", "a link to nothing"), ("pipe.bin", "a pipe")):
+        with pytest.raises(LogReadError, match=f"^{logs / name}: {kind}, not a log file$"):
+            find_logs([logs / name])
+
+
 def test_a_batch_that_finds_no_log_lists_its_folders_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:

@@ -360,6 +360,8 @@ def test_a_piped_log_reads_as_the_log_it_carries(
     monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(b"")))
     with pytest.raises(LogReadError, match=r"^-: nothing came from standard input$"):
         read_log("-")
+    with pytest.raises(LogReadError, match=r"^/dev/null: nothing came from a device$"):
+        read_log("/dev/null")  # "from a pipe" before
     packed = tmp_path / "text.bin.gz"
     packed.write_bytes(gzip.compress(b"not a log"))
     with pytest.raises(LogReadError, match=f"^{re.escape(str(packed))}: not a DataFlash log"):

@@ -41,7 +41,7 @@ from threadpoolctl import threadpool_limits
 
 from altfuse import __version__
 from altfuse.errors import AltfuseError, LogReadError, ParameterError, Refusal, out_of_memory
-from altfuse.files import COMPRESSIONS, compression_named
+from altfuse.files import COMPRESSIONS, compression_named, stream_kind
 from altfuse.io import sha256_of
 from altfuse.job import FileRun, Outputs, fuse_to_files
 from altfuse.memory import one_heap
@@ -228,6 +228,8 @@ def _listing(paths: Sequence[str | Path]) -> list[Listed]:
         root = Path(raw)
         if root.is_file():
             listed.append((root, Path(root.name), True))
+        elif kind := _not_a_file(root):
+            raise LogReadError(f"{root}: {kind}, not a log file")
         elif root.is_dir():
             listed += [
                 (p, p.relative_to(root), False)
@@ -253,6 +255,9 @@ def _matching(listed: Sequence[Listed], pattern: str | Sequence[str]) -> list[tu
     for log, relative, named in listed:
         if not (named or any(fnmatch.fnmatch(log.name.lower(), each) for each in patterns)):
             continue
+        if kind := _not_a_file(log):
+            logging.getLogger("altfuse").warning("%s: %s: not in this batch", log, kind)
+            continue
         real = log.resolve()
         if real in seen:
             continue
@@ -267,13 +272,22 @@ def _matching(listed: Sequence[Listed], pattern: str | Sequence[str]) -> list[tu
 
 
 def _files_under(root: Path) -> list[Path]:
-    """The files under ``root`` (its links to folders not followed), sorted; a folder that
-    cannot be listed is said, as a warning: its logs are not in the batch (``rglob`` passed
-    over it in silence)."""
+    """What is under ``root`` but folders (its links to folders not followed), sorted; a
+    folder that cannot be listed is said, as a warning: its logs are not in the batch
+    (``rglob`` passed over it in silence)."""
     found: list[Path] = []
     for folder, _, names in os.walk(root, onerror=_unlisted):
-        found += [p for p in (Path(folder, n) for n in names) if p.is_file()]
+        found += [Path(folder, n) for n in names]
     return sorted(found)
+
+
+def _not_a_file(path: Path) -> str:
+    """What ``path`` is where it is there but not a file or a folder (a link to nothing, a
+    named pipe that would hold the batch until something writes to it, a device); "" where it
+    is a file or a folder."""
+    if path.is_symlink() and not path.exists():
+        return "a link to nothing"
+    return stream_kind(path)
 
 
 def _unlisted(exc: OSError) -> None:

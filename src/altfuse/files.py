@@ -20,11 +20,21 @@ def is_stream(path: Path) -> bool:
     (``/dev/null``; ``/dev/stdout`` on a terminal), a named pipe (``/dev/stdout`` on a pipe).
     Such an output is written into, never replaced (:func:`altfuse.write.atomic_outputs`);
     such a log is read as it flows (:func:`altfuse.io.read_log`)."""
+    return bool(stream_kind(path))
+
+
+def stream_kind(path: Path) -> str:
+    """What ``path`` is where :func:`is_stream`: "a pipe" (named or not), "a device" or "a socket";
+    "" where it is a file, a folder or nothing."""
     try:
         mode = os.stat(path).st_mode
     except (OSError, ValueError):
-        return False
-    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
+        return ""
+    if stat.S_ISFIFO(mode):
+        return "a pipe"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "" if stat.S_ISREG(mode) or stat.S_ISDIR(mode) else "a device"
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import IO, Any, Literal, cast
 
 from altfuse.errors import AltfuseError, LogReadError
-from altfuse.files import Compression, compression_of, is_stream
+from altfuse.files import Compression, compression_of, is_stream, stream_kind
 from altfuse.io.framing import FMT_HEADER
 from altfuse.model import FlightLog
 
@@ -231,7 +231,7 @@ def _read_piped(path: Path) -> FlightLog:
     try:
         with path.open("rb") as stream:
             _refuse_terminal(path, stream)
-            return _read_copied(path, stream, "a pipe")
+            return _read_copied(path, stream, stream_kind(path) or "a pipe")
     except OSError as exc:
         raise LogReadError(f"{path}: cannot read ({exc.strerror or exc})") from exc
 
