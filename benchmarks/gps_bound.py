@@ -39,12 +39,12 @@ sys.path.insert(0, str(ROOT / "tests"))
 from accuracy import (  # noqa: E402
     Flight,
     arguments,
-    coverage,
     flights,
     prepared_flight,
     verdict,
     window_counts,
 )
+from altfuse.metrics import coverage  # noqa: E402
 from repeated import repeated_log  # noqa: E402
 
 GRID_S = (300.0, 600.0, 1200.0, 3600.0, 1e6)

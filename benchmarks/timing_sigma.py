@@ -33,12 +33,12 @@ from accuracy import (  # noqa: E402
     COVERAGE_WINDOW,
     Flight,
     arguments,
-    coverage,
     flights,
     label,
     prepared_flight,
     window_counts,
 )
+from altfuse.metrics import coverage  # noqa: E402
 
 GRID_S = (0.0, 0.002, 0.003, 0.004, 0.005, 0.006, 0.008, 0.010)
 #: The smoothed climb rate [m/s] beyond which a tick is climbing (or descending).

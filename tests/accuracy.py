@@ -10,7 +10,6 @@ errors lie within its +-2 ``fused_std``. Used by ``tests/test_smoother_accuracy.
 from __future__ import annotations
 
 import argparse
-import math
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -18,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from altfuse.evaluation import Evaluation, choose_truth
-from altfuse.fuse import METHODS, FusionResult
+from altfuse.fuse import METHODS
 from altfuse.fuse.base import DIVERGED
 from altfuse.io import read_log
 from altfuse.pipeline import FuseOptions, Prepared, prepare, run_method
@@ -98,21 +97,6 @@ def label(flight: Flight) -> str:
     return f"{scenario} seed {seed}" + (f" {'+'.join(faults)}" if faults else "")
 
 
-def coverage(error: np.ndarray, sigma: np.ndarray) -> float:
-    """The share of the ticks with both whose true error lies within +-2 sigma."""
-    ok = np.isfinite(error) & np.isfinite(sigma)
-    return float(np.mean(np.abs(error[ok]) <= 2 * sigma[ok])) if ok.any() else math.nan
-
-
-def sigma_of(result: FusionResult) -> np.ndarray | None:
-    """A method's own standard deviation per tick, where it gives one."""
-    if "fused_std" in result.tick_traces:
-        return result.tick_traces["fused_std"]
-    if "fused_variance" in result.tick_traces:
-        return np.sqrt(result.tick_traces["fused_variance"])
-    return None
-
-
 def window_counts(covers: np.ndarray) -> tuple[int, int, int]:
     """How many of the coverages ``covers`` lie within COVERAGE_WINDOW, above it, below it."""
     lo, hi = COVERAGE_WINDOW
@@ -129,10 +113,7 @@ def verdict(evaluation: Evaluation, method: str) -> dict[str, object]:
     sensors = [r for r in evaluation.rows if r.kind == "sensor"]
     best = min(sensors, key=lambda r: r.overall.rmse)
     mine = rows[method].overall
-    run = evaluation.runs[method]
-    sigma = sigma_of(run.result)
-    error = run.result.fused - evaluation.truth.h
-    cover = coverage(error, sigma) if sigma is not None else math.nan
+    cover = mine.within_2std
     ekf = rows["ekf"].overall.rmse if "ekf" in rows and rows["ekf"].kind == "onboard" else None
     checks = {
         "rmse": mine.rmse <= best.overall.rmse + max(0.03, 0.1 * best.overall.rmse),

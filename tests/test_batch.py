@@ -238,6 +238,10 @@ def test_evaluate_and_plot_in_a_batch(tmp_path: Path) -> None:
     summary = pd.read_csv(out / "summary.csv")
     assert summary.truth[0] == "SIM.Alt"
     assert summary.support_rmse[0] == pytest.approx(0.2355, abs=1e-3)
+    assert "support_within_2std" not in summary  # a weighting: no standard deviation
+    evaluated = json.loads((out / "paper_a.evaluation.json").read_text())
+    smoother = next(r for r in evaluated["rows"] if r["name"] == "smoother")["overall"]
+    assert summary.smoother_within_2std[0] == pytest.approx(smoother["within_2std"], abs=1e-6)
 
 
 def test_local_processes_and_a_dask_local_cluster_write_identical_outputs(tmp_path: Path) -> None:

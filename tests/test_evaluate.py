@@ -33,6 +33,46 @@ def test_error_stats_hand_computed() -> None:
     assert s.max_abs == 1.0
     assert s.bias == pytest.approx(0.5 / 3)
     assert error_stats(estimate, truth, np.zeros(4, dtype=bool)).as_dict()["rmse"] is None
+    assert s.as_dict()["within_2std"] is None  # no standard deviation given
+    # errors +1, -0.5 against 2 sigma of 1.0 and 0.4: within on the first only; the third
+    # tick has no estimate, the fourth's error no sigma: not counted
+    std = np.array([0.5, 0.2, 9.0, np.nan])
+    assert error_stats(estimate, truth, std=std).within_2std == pytest.approx(0.5)
+
+
+def test_each_method_s_standard_deviation_is_measured_against_the_truth(tmp_path: Path) -> None:
+    """``evaluate`` says how much of a method's true errors its own +-2 sigma covers (the
+    smoother's ``fused_std_m``; Paper B's filters' variance), over the flight and each
+    segment, in the table, the JSON and the CSV; "-" for the weightings, which give none
+    (the bar's coverage was a test helper's alone)."""
+    report = tmp_path / "report.json"
+    table = tmp_path / "report.csv"
+    result = CliRunner().invoke(
+        cli,
+        ["evaluate", str(PAPER_A), "--methods", "support,delay1,smoother", "--segments", "60",
+         "-o", str(report), "--csv", str(table)],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert lines[1].split() == ["name", "kind", "RMSE", "MAE", "max", "bias", "+-2std", "n"]
+    cells = {line.split()[0]: line.split() for line in lines[2:7]}
+    assert cells["support"][6] == "-"
+    assert cells["gps"][6] == "-"
+    evaluation = evaluate(PAPER_A, ["support", "delay1", "smoother"], segments="60")
+    run = evaluation.runs["smoother"].result
+    error = run.fused - evaluation.truth.h
+    ok = np.isfinite(error)
+    by_hand = float(np.mean(np.abs(error[ok]) <= 2 * run.tick_traces["fused_std"][ok]))
+    assert 0.9 < by_hand < 1.0  # measured: 0.932
+    assert float(cells["smoother"][6]) == pytest.approx(by_hand, abs=5e-4)
+    assert 0 < float(cells["delay1"][6]) <= 1
+    rows = {r["name"]: r for r in json.loads(report.read_text())["rows"]}
+    assert rows["smoother"]["overall"]["within_2std"] == pytest.approx(by_hand)
+    assert rows["support"]["overall"]["within_2std"] is None
+    assert all(0 < s["within_2std"] <= 1 for s in rows["smoother"]["segments"].values())
+    csv = pd.read_csv(table)
+    overall = csv[(csv["name"] == "smoother") & (csv["segment"] == "all")]
+    assert overall["within_2std"].iloc[0] == pytest.approx(by_hand)
 
 
 def test_segments_by_length_and_by_boundaries() -> None:
@@ -135,7 +175,9 @@ def test_real_log_uses_the_ekf_as_a_reference_and_says_so(tmp_path: Path) -> Non
     assert len(report["segments"]) == 4  # 80.5-175.9 s in 30 s windows
     frame = pd.read_csv(table)
     assert set(frame.segment) == {"all", *report["segments"]}
-    assert set(frame.columns) == {"name", "kind", "segment", "n", "rmse", "mae", "max_abs", "bias"}
+    assert set(frame.columns) == {
+        "name", "kind", "segment", "n", "rmse", "mae", "max_abs", "bias", "within_2std",
+    }  # fmt: skip
 
 
 def test_asking_for_a_reference_the_log_lacks_fails_in_one_line() -> None:
@@ -213,12 +255,12 @@ def test_the_table_s_columns_stay_apart_at_any_magnitude() -> None:
     from altfuse.metrics import ErrorStats
 
     huge = ErrorStats(n=1234567, rmse=19793.32312, mae=12698.125, max_abs=-1e7, bias=-98765.4)
-    small = ErrorStats(n=3, rmse=0.01, mae=0.01, max_abs=0.02, bias=0.0)
+    small = ErrorStats(n=3, rmse=0.01, mae=0.01, max_abs=0.02, bias=0.0, within_2std=0.5)
     lines = _aligned(
-        [["name", "kind", "RMSE", "MAE", "max", "bias", "n"],
+        [["name", "kind", "RMSE", "MAE", "max", "bias", "+-2std", "n"],
          _stats_cells("a-long-method-name", "method", huge), _stats_cells("gps", "sensor", small)]
     )  # fmt: skip
-    assert [len(line.split()) for line in lines] == [7, 7, 7]
+    assert [len(line.split()) for line in lines] == [8, 8, 8]
     assert lines[1].split()[2:4] == ["19793.323", "12698.125"]
     assert len({len(line) for line in lines}) == 1  # numbers right-aligned to one edge
 

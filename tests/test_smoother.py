@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
-from accuracy import coverage, verdict
+from accuracy import verdict
 from altfuse.cli import cli
 from altfuse.datum import Track
 from altfuse.evaluation import evaluate
@@ -56,6 +56,7 @@ from altfuse.fuse.smoother.noise import (
 )
 from altfuse.fuse.smoother.passes import LOCKOUT_S
 from altfuse.io import read_log
+from altfuse.metrics import coverage
 from altfuse.model import Samples, SensorKind
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions, fuse_log, prepare, prepare_log, run_method

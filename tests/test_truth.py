@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 from pymavlink import DFReader
 
-from accuracy import coverage, verdict
+from accuracy import verdict
 from altfuse.align import estimate_lag
 from altfuse.cli import cli
 from altfuse.datum import Wind
@@ -22,6 +22,7 @@ from altfuse.fuse.smoother import SmootherParams
 from altfuse.fuse.smoother.model import LEARN_SCALE_STD
 from altfuse.info import describe_datum
 from altfuse.io import read_log
+from altfuse.metrics import coverage
 from altfuse.pipeline import (
     FuseOptions,
     Prepared,

@@ -181,6 +181,8 @@ def _described(name: str, done: FileRun, seconds: float) -> LogResult:
             stats = row.overall.as_dict()
             metrics[f"{row.name}_rmse"] = stats["rmse"]
             metrics[f"{row.name}_max"] = stats["max_abs"]
+            if stats["within_2std"] is not None:  # a method with a standard deviation
+                metrics[f"{row.name}_within_2std"] = stats["within_2std"]
         for method, found in done.evaluation.diverged().items():
             metrics[f"{method}_diverged"] = found["diverged_ticks"]
     valued = sum(counts.get(s, 0) for s in ("fused", "single", "equal", "inertial"))

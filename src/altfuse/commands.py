@@ -7,6 +7,7 @@ import contextlib
 import dataclasses
 import json
 import logging
+import math
 import shutil
 import sys
 import time
@@ -411,12 +412,13 @@ def _progress_line() -> Iterator[None]:
         handler.close()
 
 
-_STATS_HEADER = ("name", "kind", "RMSE", "MAE", "max", "bias", "n")
+_STATS_HEADER = ("name", "kind", "RMSE", "MAE", "max", "bias", "+-2std", "n")
 
 
 def _stats_cells(name: str, kind: str, s: ErrorStats) -> list[str]:
+    within = "-" if math.isnan(s.within_2std) else f"{s.within_2std:.3f}"
     return [name, kind, f"{s.rmse:.3f}", f"{s.mae:.3f}", f"{s.max_abs:.3f}", f"{s.bias:+.3f}",
-            str(s.n)]  # fmt: skip
+            within, str(s.n)]  # fmt: skip
 
 
 def _aligned(rows: list[list[str]]) -> list[str]:
@@ -466,7 +468,8 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
 
     The truth is the simulator's SIM altitude when the log has it; otherwise the autopilot's EKF
     height stands in, labelled as a reference. Errors are in metres: RMSE, mean absolute error,
-    maximum absolute error and bias (mean of estimate - truth).
+    maximum absolute error and bias (mean of estimate - truth); +-2std is the share of a
+    method's errors within twice its own standard deviation (about 0.95 where that is right).
 
     \b
     Example:

@@ -283,23 +283,26 @@ def _told_apart(spans: Sequence[tuple[float, float]], digits: int) -> bool:
     return len(set(bounds)) == len(bounds) and all(a != b for a, b in bounds)
 
 
-def _row(
+def _row(  # noqa: PLR0913 (an estimate, its standard deviation, the truth, its clock, spans)
     name: str,
     kind: Literal["method", "sensor", "onboard"],
     estimate: FloatArray,
     truth: FloatArray,
     t: FloatArray,
     segments: dict[str, tuple[float, float]],
+    std: FloatArray | None = None,
 ) -> Row:
-    """The errors of ``estimate`` over the whole clock ``t`` and over each segment: the ticks
+    """The errors of ``estimate`` (and the share of them its standard deviation ``std``
+    covers, where it has one) over the whole clock ``t`` and over each segment: the ticks
     from its start up to its end, the last one's end included (a slice of the sorted clock:
     thousands of segments of a long log in one pass over it)."""
     per_segment = {}
     for label, (a, b) in segments.items():
         first = int(np.searchsorted(t, a, side="left"))
         stop = int(np.searchsorted(t, b, side="left" if b < t[-1] else "right"))
-        per_segment[label] = error_stats(estimate[first:stop], truth[first:stop])
-    return Row(name, kind, estimate, error_stats(estimate, truth), per_segment)
+        part = None if std is None else std[first:stop]
+        per_segment[label] = error_stats(estimate[first:stop], truth[first:stop], std=part)
+    return Row(name, kind, estimate, error_stats(estimate, truth, std=std), per_segment)
 
 
 def evaluate(
@@ -349,7 +352,7 @@ def evaluate_prepared(
             failed[name] = str(exc)
             continue
         runs[name] = run
-        rows.append(_row(name, "method", run.result.fused, reference.h, t, spans))
+        rows.append(_row(name, "method", run.result.fused, reference.h, t, spans, run.result.std))
     for i, name in enumerate(prepared.referred.names):
         rows.append(_row(name, "sensor", prepared.referred.h[:, i], reference.h, t, spans))
     ekf = next((r for r in prepared.log.references if r.name == "ekf"), None)

@@ -113,6 +113,8 @@ class ErrorStats:
     """Errors of an estimate against a truth or reference [m], over the ticks where both exist.
 
     ``bias`` is the mean of ``estimate - truth``: positive when the estimate reads high.
+    ``within_2std`` is :func:`coverage` of the estimate's own standard deviation, where it
+    gives one (NaN otherwise).
     """
 
     n: int
@@ -120,6 +122,7 @@ class ErrorStats:
     mae: float
     max_abs: float
     bias: float
+    within_2std: float = math.nan
 
     def as_dict(self) -> dict[str, float | int | None]:
         """The fields, with NaN (no common tick) as None so that the JSON stays strict."""
@@ -127,9 +130,13 @@ class ErrorStats:
 
 
 def error_stats(
-    estimate: FloatArray, truth: FloatArray, mask: npt.NDArray[np.bool_] | None = None
+    estimate: FloatArray,
+    truth: FloatArray,
+    mask: npt.NDArray[np.bool_] | None = None,
+    std: FloatArray | None = None,
 ) -> ErrorStats:
-    """RMSE, mean absolute error, maximum absolute error and bias of ``estimate`` [m]."""
+    """RMSE, mean absolute error, maximum absolute error and bias of ``estimate`` [m], and
+    where its standard deviation ``std`` is given, how much of the errors it covers."""
     both = np.isfinite(estimate) & np.isfinite(truth)
     if mask is not None:
         both &= mask
@@ -142,7 +149,15 @@ def error_stats(
         mae=float(np.mean(np.abs(e))),
         max_abs=float(np.max(np.abs(e))),
         bias=float(np.mean(e)),
+        within_2std=math.nan if std is None else coverage(e, std[both]),
     )
+
+
+def coverage(error: FloatArray, std: FloatArray) -> float:
+    """The share of the ticks with both whose ``error`` lies within +-2 ``std``: 0.954 where
+    ``std`` is right and the errors normal; NaN where no tick has both."""
+    ok = np.isfinite(error) & np.isfinite(std)
+    return float(np.mean(np.abs(error[ok]) <= 2 * std[ok])) if ok.any() else math.nan
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:

@@ -225,6 +225,17 @@ class FusionResult:
     tick_traces: dict[str, FloatArray] = field(default_factory=dict)
     params: dict[str, float | int | str] = field(default_factory=dict)
 
+    @property
+    def std(self) -> FloatArray | None:
+        """The method's own standard deviation of ``fused`` per tick [m], where it gives one:
+        the smoother's ``fused_std``, Paper B's filters' ``fused_variance`` (their P*); None
+        for the weightings."""
+        if "fused_std" in self.tick_traces:
+            return self.tick_traces["fused_std"]
+        if "fused_variance" in self.tick_traces:
+            return np.sqrt(self.tick_traces["fused_variance"])
+        return None
+
 
 def combine(
     z: FloatArray,
