@@ -25,8 +25,9 @@ from altfuse.fuse import FusionInput
 from altfuse.fuse.support import SupportParams, fuse_support
 from altfuse.model import Samples, Series
 from altfuse.params import InvalidParameter
-from altfuse.pipeline import FuseOptions
+from altfuse.pipeline import FuseOptions, fuse_log
 from altfuse.steps import Step
+from conftest import shared_log
 
 
 def flight(gps_offset: float = 146.0) -> tuple[Aligned, np.ndarray]:
@@ -62,6 +63,29 @@ def test_offsets_on_the_ground_and_matched_to_the_reference() -> None:
     assert "median difference from baro" in offsets["rangefinder"].method
     assert offsets["rangefinder"].offset_m == pytest.approx(0.2, abs=0.05)
     np.testing.assert_allclose(ref.h[:, 1], h, atol=0.25)
+
+
+@pytest.mark.parametrize("climb_m", [0.5, 1.0, 5.0, 15.0])
+def test_a_larger_take_off_climb_places_the_take_off_where_the_climb_began(climb_m: float) -> None:
+    """``--takeoff-climb`` confirms a take-off (against a barometer wandering on the ground):
+    the take-off stays where the climb passed 1 m (or the climb, where less). Placed where a
+    5 m climb was reached, the ground window lay in the climb (at 122.5 s, the window 116.5-
+    121.5 s rising 3 m), and the vehicle was held still there."""
+    aligned, _ = flight()
+    ref = refer_to_takeoff(aligned, ground_window_s=5.0, takeoff_climb_m=climb_m)
+    # h rises 2 m/s from 120 s; smoothed, it exceeds 0.5 m at 120.3 s and 1 m at 120.5 s
+    assert ref.takeoff_s == pytest.approx(120.3 if climb_m < 1 else 120.5, abs=0.15)
+    assert ref.ground_window_s[1] < 120.0
+
+
+def test_a_real_flight_s_take_off_holds_with_a_larger_take_off_climb() -> None:
+    """A real 150 s flight fused with ``--takeoff-climb 5``: before, its take-off was placed at
+    250.2 s, 6.7 s into the climb, and the smoother, held still there, left both sensors on
+    205 ticks (by 2.3 m)."""
+    log = shared_log("ardupilot/beastayyg_log_0036_mechanical_failure.bin")
+    runs = [fuse_log(log, FuseOptions(takeoff_climb_m=climb)) for climb in (1.0, 5.0)]
+    assert runs[1].referred.takeoff_s == runs[0].referred.takeoff_s == pytest.approx(243.5)
+    assert runs[1].provenance["guard"]["diverged_ticks"] == 0
 
 
 def test_offset_sensor_keeps_its_weight() -> None:

@@ -74,6 +74,12 @@ RANGEFINDER_GROUND_SHARE = 0.5
 GROUND_MAX_SPEED_M_S = 1.0
 #: The ground window ends this long before the detected take-off [s].
 TAKEOFF_MARGIN_S = 1.0
+#: A take-off is placed where the rise that reached ``--takeoff-climb`` last passed this height
+#: above the ground [m] (or the climb, where that is less). A larger climb confirms a take-off
+#: against a barometer that wanders on the ground; placed where it was reached, a 5 m climb put
+#: the ground window in the climb itself, and the vehicle was held still there (a real 150 s
+#: flight: 205 ticks diverged, 2.3 m from both sensors).
+TAKEOFF_RISE_M = 1.0
 #: The vehicle is taken to stand still until this long before the detected take-off [s]: a gentle
 #: climb can take 2-3 s to rise the 1 m that detects it (0.3 m at the ground window's end).
 STILL_MARGIN_S = 3.0
@@ -402,11 +408,12 @@ def detect_takeoff(
     climb_m: float,
     since: float | None = None,
 ) -> float | None:
-    """First time [s] at which ``h`` (``smooth``: :func:`_smoothed`) rises ``climb_m`` above its
-    level over the log's first ``ground_s`` seconds; or, ``since`` the autopilot's land
-    detector said the vehicle flies, above its level over the ``ground_s`` seconds before that
-    and after it (a barometer warming on the ground rises as well: a copter's rose 1 m in 30 s
-    of the 72 s it stood before take-off)."""
+    """The take-off [s] of the first rise of ``h`` (``smooth``: :func:`_smoothed`) ``climb_m``
+    above its level over the log's first ``ground_s`` seconds; or, ``since`` the autopilot's
+    land detector said the vehicle flies, above its level over the ``ground_s`` seconds before
+    that and after it (a barometer warming on the ground rises as well: a copter's rose 1 m in
+    30 s of the 72 s it stood before take-off). The take-off is where that rise last passed
+    ``TAKEOFF_RISE_M`` (or ``climb_m``, where less) above the ground."""
     valid = np.isfinite(h)
     if since is None:
         start, after = _first_seconds(valid, t, ground_s), valid
@@ -416,7 +423,11 @@ def detect_takeoff(
         return None
     ground = float(np.median(h[start]))
     above = np.flatnonzero(after & (smooth > ground + climb_m))
-    return float(t[above[0]]) if above.size else None
+    if not above.size:
+        return None
+    low = np.flatnonzero(after[: above[0]] & (smooth[: above[0]] <= ground + TAKEOFF_RISE_M))
+    rising = np.flatnonzero(after[low[-1] + 1 :])[0] + low[-1] + 1 if low.size else above[0]
+    return float(t[rising])
 
 
 def detector_takeoffs(landed: Samples | None) -> tuple[float, ...]:
