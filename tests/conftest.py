@@ -74,29 +74,34 @@ def paper_a_flight(seed: int = 7) -> PaperAFlight:
     return PaperAFlight(truth=truth, z=z)
 
 
+#: The ``altfuse`` logger as the session found it: handlers, level, propagation.
+_LOGGER = logging.getLogger("altfuse")
+_PRISTINE = (_LOGGER.handlers[:], _LOGGER.level, _LOGGER.propagate)
+
+
 @pytest.fixture(autouse=True)
 def _altfuse_logger_restored() -> Iterator[None]:
-    """The ``altfuse`` logger as it was before each test: a command run in the test's process
-    (``CliRunner``) sets its handler, level and propagation for its own stderr, which later
-    tests' ``caplog`` would otherwise miss (pytest before 9 sees no record of a logger that
-    does not propagate)."""
-    logger = logging.getLogger("altfuse")
-    kept = logger.handlers[:], logger.level, logger.propagate
+    """The ``altfuse`` logger as the session found it, after each test: a command run in the
+    test's process (``CliRunner``) sets its handler, level and propagation for its own stderr,
+    which later tests' ``caplog`` would otherwise miss (pytest before 9 sees no record of a
+    logger that does not propagate). As the session found it, not as the test did: a session
+    fixture is set up before this one, and its command's setup was kept for every later test."""
     yield
-    logger.handlers[:], logger.level, logger.propagate = kept
+    _LOGGER.handlers[:], _LOGGER.level, _LOGGER.propagate = _PRISTINE[0][:], *_PRISTINE[1:]
 
 
 @pytest.fixture(scope="session")
 def long_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 900 s hover written by ``altfuse simulate``, once per session: the input of runs long
-    enough to be signalled or hung up midway (altfuse never writes to its input)."""
-    from click.testing import CliRunner
-
-    from altfuse.cli import cli
+    """A 900 s hover written as ``altfuse simulate`` writes it, once per session: the input of
+    runs long enough to be signalled or hung up midway (altfuse never writes to its input).
+    Written through the library, not the command, whose logging setup would be the test's that
+    first asks for it (its logger no longer propagating; before :func:`_altfuse_logger_restored`
+    restored the session's, every later test's ``caplog`` saw nothing with pytest before 9:
+    the four tests of ``test_compiled.py`` on the lowest versions)."""
+    from altfuse.simulate import simulate_flight, write_simulated_log
 
     log = tmp_path_factory.mktemp("long") / "long.bin"
-    result = CliRunner().invoke(cli, ["simulate", "hover", "-o", str(log), "--duration", "900"])
-    assert result.exit_code == 0, result.output
+    write_simulated_log(simulate_flight("hover", duration_s=900.0), log)
     return log
 
 
