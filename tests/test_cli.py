@@ -181,6 +181,36 @@ def test_nonsense_parameters(tmp_path: Path, args: list[str], fragment: str) -> 
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    ("command", "args", "fragment"),
+    [
+        ("fuse", ["-o", "{out}", "--weights", "--force"], "'--weights': '--force' is an option"),
+        ("fuse", ["-o", "--force"], "'--output': '--force' is an option, not a file name"),
+        ("fuse", ["-o", "{out}", "--meta", "-v"], "Option '--meta' requires an argument"),
+        ("evaluate", ["--csv", "--force"], "'--csv': '--force' is an option, not a file name"),
+        ("batch", ["-o", "--force"], "'--output': '--force' is an option, not a file name"),
+    ],
+)
+def test_an_option_given_where_a_file_name_goes_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: str, args: list[str], fragment: str
+) -> None:
+    """A path forgotten after an output option: ``--weights --force`` wrote the weights to a
+    file named ``--force`` and left the table it meant to overwrite as it was (click takes
+    the next word as the value). Now exit 2, one line, nothing written; ``./--force`` names
+    such a file."""
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "out.csv"
+    out.write_text("an earlier run's table")
+    log = SAMPLE_LOG.parent if command == "batch" else SAMPLE_LOG
+    result = run(command, log, *(a.format(out=out) for a in args))
+    assert_one_line_error(result, 2, fragment)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
+    assert out.read_text() == "an earlier run's table"
+    written = run("fuse", SAMPLE_LOG, "-o", "./--force")
+    assert written.exit_code == 0, written.output
+    assert (tmp_path / "--force").is_file()
+
+
 def test_output_onto_the_input_is_refused(tmp_path: Path) -> None:
     log = tmp_path / "log.bin"
     log.write_bytes(SAMPLE_LOG.read_bytes())

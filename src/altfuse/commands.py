@@ -231,9 +231,23 @@ def _once_each(name: str, pairs: tuple[tuple[str, float], ...]) -> dict[str, flo
     return out
 
 
+class _OutputPath(click.Path):
+    """An output's path, refused where it is an option: ``--weights --force`` wrote the weights
+    to a file named ``--force`` and left the table it meant to overwrite (click takes the next
+    word as the value, whatever it is). A file whose name begins with a dash: ``./-name``."""
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        text = str(value)
+        if text.startswith("-") and len(text) > 1 and (text[1].isalpha() or text[1] == "-"):
+            self.fail(
+                f"{text!r} is an option, not a file name (a file so named: ./{text})", param, ctx
+            )
+        return super().convert(value, param, ctx)
+
+
 # a folder is taken: read_log says it is one, and points to batch
 _LOG_ARG = click.argument("log", type=click.Path(path_type=Path))
-_PATH = click.Path(dir_okay=False, path_type=Path)
+_PATH = _OutputPath(dir_okay=False, path_type=Path)
 
 
 def _output_option(help_text: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
@@ -561,7 +575,7 @@ class _Progress:
 @click.option(
     "-o",
     "--output",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=_OutputPath(file_okay=False, path_type=Path),
     required=True,
     help="The folder for every log's outputs (mirroring the input tree) and summary.csv.",
 )
