@@ -189,6 +189,8 @@ def test_nonsense_parameters(tmp_path: Path, args: list[str], fragment: str) -> 
         ("fuse", ["-o", "{out}", "--meta", "-v"], "Option '--meta' requires an argument"),
         ("evaluate", ["--csv", "--force"], "'--csv': '--force' is an option, not a file name"),
         ("batch", ["-o", "--force"], "'--output': '--force' is an option, not a file name"),
+        ("fuse", ["-o", "results/"], "'results/' names a folder; name the file in it"),
+        ("fuse", ["-o", "{out}", "--weights", "w/"], "'w/' names a folder; name the file in it"),
     ],
 )
 def test_an_option_given_where_a_file_name_goes_is_refused(
@@ -197,7 +199,8 @@ def test_an_option_given_where_a_file_name_goes_is_refused(
     """A path forgotten after an output option: ``--weights --force`` wrote the weights to a
     file named ``--force`` and left the table it meant to overwrite as it was (click takes
     the next word as the value). Now exit 2, one line, nothing written; ``./--force`` names
-    such a file."""
+    such a file. So is a file's path that names a folder: ``-o results/`` wrote a file
+    named ``results``."""
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "out.csv"
     out.write_text("an earlier run's table")

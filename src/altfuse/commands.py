@@ -8,6 +8,7 @@ import dataclasses
 import json
 import logging
 import math
+import os
 import shutil
 import sys
 import time
@@ -234,7 +235,9 @@ def _once_each(name: str, pairs: tuple[tuple[str, float], ...]) -> dict[str, flo
 class _OutputPath(click.Path):
     """An output's path, refused where it is an option: ``--weights --force`` wrote the weights
     to a file named ``--force`` and left the table it meant to overwrite (click takes the next
-    word as the value, whatever it is). A file whose name begins with a dash: ``./-name``."""
+    word as the value, whatever it is). A file whose name begins with a dash: ``./-name``. A
+    file's path that ends in a separator names a folder: ``-o results/`` wrote a file named
+    ``results``."""
 
     def convert(self, value: Any, param: Any, ctx: Any) -> Any:
         text = str(value)
@@ -242,6 +245,8 @@ class _OutputPath(click.Path):
             self.fail(
                 f"{text!r} is an option, not a file name (a file so named: ./{text})", param, ctx
             )
+        if not self.dir_okay and text.endswith(("/", os.sep)):
+            self.fail(f"{text!r} names a folder; name the file in it", param, ctx)
         return super().convert(value, param, ctx)
 
 
