@@ -214,6 +214,33 @@ def test_an_option_given_where_a_file_name_goes_is_refused(
     assert (tmp_path / "--force").is_file()
 
 
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (
+            ["fuse", "-o", "{d}/fused.json"],
+            "fused.json: this table is written as CSV, or as Parquet",
+        ),
+        (["fuse", "-o", "{d}/fused.bin"], "fused.bin: this table is written as CSV"),
+        (["fuse", "-o", "{d}/fused.xlsx.gz"], "fused.xlsx.gz: this table is written as CSV"),
+        (["fuse", "-o", "{d}/a.csv", "--weights", "{d}/w.png"], "w.png: this table is"),
+        (["evaluate", "--csv", "{d}/r.parquet"], "r.parquet: this table is written as CSV, not as"),
+    ],
+)
+def test_a_table_named_as_another_format_is_refused(
+    tmp_path: Path, args: list[str], named: str
+) -> None:
+    """``-o fused.json`` wrote CSV into a .json file, and ``-o fused.bin`` a CSV that reads later
+    as a damaged log, exit 0; ``evaluate --csv r.parquet`` wrote CSV under a Parquet name. Now
+    exit 2, one line, nothing written."""
+    command, *rest = args
+    result = run(command, SAMPLE_LOG, *(a.format(d=tmp_path) for a in rest))
+    assert_one_line_error(result, 2, named)
+    assert not list(tmp_path.iterdir())
+    for kept in ("a.txt", "b.csv.gz", "c.tsv"):
+        assert run("fuse", SAMPLE_LOG, "-o", tmp_path / kept).exit_code == 0
+
+
 def test_output_onto_the_input_is_refused(tmp_path: Path) -> None:
     log = tmp_path / "log.bin"
     log.write_bytes(SAMPLE_LOG.read_bytes())

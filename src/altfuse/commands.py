@@ -47,6 +47,7 @@ from altfuse.write import (
     TableFormat,
     atomic_outputs,
     check_paths,
+    check_table_path,
     refuse_existing,
     write_json,
 )
@@ -500,6 +501,8 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
     if plot_path is not None:
         check_plot_path(plot_path)
     check_paths([json_path, csv_path, plot_path], [log])
+    if csv_path is not None:
+        check_table_path(csv_path, parquet=False)
     refuse_existing(force, json_path, csv_path, plot_path)
     named = (m.strip() for m in (methods or ",".join(METHODS)).split(","))
     chosen = list(dict.fromkeys(m for m in named if m))  # each once, in the order given

@@ -29,6 +29,7 @@ from altfuse.write import (
     OutputError,
     Writer,
     check_paths,
+    check_table_path,
     default_meta_path,
     fused_table,
     refuse_existing,
@@ -70,12 +71,16 @@ class Outputs:
         return [p for p in optional if p is not None]
 
     def refuse(self, log_path: Path, force: bool = False) -> None:
-        """Refuse outputs that would overwrite the input log or each other, or existing files
-        unless ``force`` (:func:`altfuse.write.check_paths`), and a table for a standard output
-        that is closed (``-o - >&-``: Python's ``sys.stdout`` is None)."""
+        """Refuse outputs that would overwrite the input log or each other, tables named as
+        another format (:func:`altfuse.write.check_table_path`), existing files unless
+        ``force`` (:func:`altfuse.write.check_paths`), and a table for a standard output that
+        is closed (``-o - >&-``: Python's ``sys.stdout`` is None)."""
         if self.csv == STDOUT and sys.stdout is None:
             raise OutputError("-: standard output is closed; name a file with -o")
         check_paths(self.paths(), [log_path])
+        for table in (self.csv, self.weights):
+            if table is not None:
+                check_table_path(table)
         refuse_existing(force, *self.paths())
 
 

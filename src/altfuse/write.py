@@ -55,6 +55,29 @@ def table_format(path: Path) -> TableFormat:
     return "parquet" if path.suffix.lower() == ".parquet" else "csv"
 
 
+#: Suffixes of other formats, refused as a table's name (:func:`check_table_path`): whoever
+#: names ``fused.json`` or ``fused.xlsx`` expects that format, and a CSV named as a log
+#: (``fused.bin``, ``fused.log``) reads later as a damaged log, in a batch's folder too.
+OTHER_FORMATS = (
+    ".json", ".xlsx", ".xls", ".ods", ".feather", ".arrow", ".h5", ".hdf5", ".mat", ".nc",
+    ".pkl", ".pickle", ".npy", ".npz", ".png", ".svg", ".pdf", ".bin", ".ulg", ".log", ".tlog",
+)  # fmt: skip
+
+
+def check_table_path(path: Path, parquet: bool = True) -> None:
+    """Refuse a table's name (a fused table's, a weights', a report's) whose suffix, less a
+    compression's, names another format (:data:`OTHER_FORMATS`; ``.parquet`` too where the
+    table is written as CSV alone, ``parquet`` False): it was written as CSV."""
+    named = path.with_suffix("") if compression_named(path) is not None else path
+    suffix = named.suffix.lower()
+    if suffix in OTHER_FORMATS or (suffix == ".parquet" and not parquet):
+        formats = "as CSV, or as Parquet for a .parquet name" if parquet else "as CSV"
+        raise ParameterError(
+            f"{path}: this table is written {formats}, not as {named.suffix}: "
+            f"name it .csv{' or .parquet' if parquet else ''}"
+        )
+
+
 _UNITS = {"velocity": "m/s", "accel_bias": "m/s^2", "accel_up": "m/s^2", "correction": "m"}
 
 
