@@ -425,8 +425,10 @@ def detect_takeoff(
     above = np.flatnonzero(after & (smooth > ground + climb_m))
     if not above.size:
         return None
-    low = np.flatnonzero(after[: above[0]] & (smooth[: above[0]] <= ground + TAKEOFF_RISE_M))
-    rising = np.flatnonzero(after[low[-1] + 1 :])[0] + low[-1] + 1 if low.size else above[0]
+    rising = int(above[0])
+    low = np.flatnonzero(after[:rising] & (smooth[:rising] <= ground + TAKEOFF_RISE_M))
+    if low.size:  # the tick after the rise's last at or under TAKEOFF_RISE_M
+        rising = int(low[-1] + 1 + np.argmax(after[low[-1] + 1 :]))
     return float(t[rising])
 
 
