@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import re
 import subprocess
@@ -69,3 +70,25 @@ def test_fuse_file_is_the_csv_table_with_the_options_and_parameters_routed() -> 
         altfuse.fuse_file(SAMPLE_LOG, method="support", beta=-1)
     with pytest.raises(InvalidParameter, match=r"^alpha is not a parameter of method 'support'"):
         altfuse.fuse_file(SAMPLE_LOG, method="support", alpha=0.5)
+
+
+def test_a_run_s_repr_at_a_prompt_is_a_summary_not_every_sample() -> None:
+    """At a prompt, ``run`` printed every sample of every series: 137 kB for a 3 min flight
+    (a FlightLog 126 kB, an evaluation 420 kB). Arrays show their ends and their shape."""
+    run = altfuse.fuse_log(SAMPLE_LOG, altfuse.FuseOptions(method="support"))
+    gps = run.log.sensors[0]
+    n = gps.t.size
+    assert n > 100
+    text = repr(gps)
+    assert text.startswith(f"Series(name='gps', kind='gps', source='{gps.source}'")
+    ends = ", ".join(f"{v:.6g}" for v in gps.t[[0, 1]]) + ", ..., "
+    ends += ", ".join(f"{v:.6g}" for v in gps.t[[-2, -1]])
+    assert f"t=array([{ends}], {n} float64)" in text
+    for value in (run, run.log, run.result, altfuse.evaluate(SAMPLE_LOG, ["mean"])):
+        text = repr(value)
+        assert text.startswith(type(value).__name__ + "(")
+        assert len(text) < 6000, (type(value).__name__, len(text))
+    status = run.result.status
+    assert f"status=array([{str(status[0])!r}, {str(status[1])!r}, ...," in repr(run.result)
+    many = dataclasses.replace(run.log, params={f"P{i:03}": float(i) for i in range(900)})
+    assert "params={'P000': 0.0, 'P001': 1.0, 'P002': 2.0, 'P003': 3.0, ...}" in repr(many)

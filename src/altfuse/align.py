@@ -29,7 +29,7 @@ import numpy.typing as npt
 from altfuse.compiled import compiled
 from altfuse.errors import NoUsableSensorsError
 from altfuse.metrics import cumulative_integral
-from altfuse.model import FloatArray, SensorKind, Series, sensor_kind
+from altfuse.model import FloatArray, SensorKind, Series, brief_repr, sensor_kind
 from altfuse.spline import cubic_spline
 
 Span = Literal["union", "overlap"]
@@ -62,6 +62,8 @@ class AlignStats:
 @dataclass(frozen=True)
 class Aligned:
     """Sources on one clock: ``z[:, i]`` is source ``names[i]`` at times ``t`` (NaN = absent)."""
+
+    __repr__ = brief_repr
 
     t: FloatArray
     names: tuple[str, ...]

@@ -52,7 +52,15 @@ from altfuse.align import Aligned, merge_duplicates, tick_range
 from altfuse.errors import NoUsableSensorsError
 from altfuse.inertial import G
 from altfuse.metrics import MAD_TO_SIGMA, running_median, runs
-from altfuse.model import SENSOR_KINDS, Attitude, FloatArray, Samples, SensorKind, Series
+from altfuse.model import (
+    SENSOR_KINDS,
+    Attitude,
+    FloatArray,
+    Samples,
+    SensorKind,
+    Series,
+    brief_repr,
+)
 from altfuse.steps import STEP_WINDOWS_S, Step, find_steps
 
 #: Fewest valid ticks a window must hold for an offset to be measured on it.
@@ -183,6 +191,8 @@ class Track:
     """The GPS's horizontal motion: its ground ``speed`` [m/s] and, where the log has it, its
     ``course`` over the ground [deg from north], read from the same records."""
 
+    __repr__ = brief_repr
+
     speed: Samples
     course: Samples | None = None
 
@@ -298,6 +308,8 @@ class Segment:
 @dataclass(frozen=True)
 class Referred:
     """Heights above take-off [m] on the aligned clock, for the sources that could be referred."""
+
+    __repr__ = brief_repr
 
     t: FloatArray
     names: tuple[str, ...]

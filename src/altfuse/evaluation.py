@@ -23,7 +23,7 @@ from altfuse.datum import Referred
 from altfuse.errors import AltfuseError, NoUsableSensorsError
 from altfuse.fuse import METHODS, method
 from altfuse.metrics import ErrorStats, error_stats
-from altfuse.model import FlightLog, FloatArray, Series
+from altfuse.model import FlightLog, FloatArray, Series, brief_repr
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions, FuseRun, Prepared, prepare_log, run_method
 
@@ -38,6 +38,8 @@ TRUTHS: tuple[TruthChoice, ...] = get_args(TruthChoice)
 @dataclass(frozen=True)
 class Truth:
     """The series every estimate is measured against, on the clock and referred to take-off."""
+
+    __repr__ = brief_repr
 
     name: Literal["sim", "ekf"]
     is_reference: bool  # True: an estimate standing in for the truth
@@ -55,6 +57,8 @@ class Truth:
 class Row:
     """One estimate's errors, overall and per segment."""
 
+    __repr__ = brief_repr
+
     name: str
     kind: Literal["method", "sensor", "onboard"]
     estimate: FloatArray
@@ -64,6 +68,11 @@ class Row:
 
 @dataclass(frozen=True)
 class Evaluation:
+    """What :func:`evaluate` measured: the truth, a row per method, sensor and the onboard EKF,
+    each method's run, the methods that could not run (with why) and the segments."""
+
+    __repr__ = brief_repr
+
     prepared: Prepared
     truth: Truth
     rows: tuple[Row, ...]

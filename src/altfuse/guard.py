@@ -29,7 +29,7 @@ import numpy as np
 from altfuse.datum import coarser_than_datum
 from altfuse.fuse.base import DIVERGED, FusionInput, FusionResult
 from altfuse.metrics import envelope, runs, white_noise_sigma
-from altfuse.model import FloatArray
+from altfuse.model import FloatArray, brief_repr
 
 #: An excursion below this [m] is never a divergence, however quiet the sensors.
 FLOOR_M = 1.0
@@ -49,6 +49,8 @@ BRIDGE_S = 0.5
 @dataclass(frozen=True)
 class Guarded:
     """A result with its diverged ticks flagged, and what the guard found."""
+
+    __repr__ = brief_repr
 
     result: FusionResult
     record: dict[str, Any]

@@ -25,7 +25,7 @@ import numpy as np
 
 from altfuse.align import cell_means
 from altfuse.metrics import cumulative_integral
-from altfuse.model import Attitude, FloatArray, Imu, Samples, Series
+from altfuse.model import Attitude, FloatArray, Imu, Samples, Series, brief_repr
 
 G = 9.80665  # standard gravity [m/s²]
 
@@ -43,6 +43,8 @@ class VerticalAcceleration:
     record
         Where it came from and the at-rest reading removed, for the provenance.
     """
+
+    __repr__ = brief_repr
 
     samples: Samples
     on_clock: FloatArray

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 from altfuse.evaluation import Evaluation, evaluate_prepared, truth_or_none
 from altfuse.fuse import DEFAULT_METHOD, method, params_for
 from altfuse.memory import release_free_memory
+from altfuse.model import brief_repr
 from altfuse.params import fields
 from altfuse.pipeline import (
     FuseOptions,
@@ -90,6 +91,8 @@ class FileRun:
     sources where nothing drew or evaluated it: :meth:`FlightLog.sensors_only`), its evaluation
     (when asked for) and the files by role (``csv``, ``meta``, ``weights``, ``png``/``svg``,
     ``json``)."""
+
+    __repr__ = brief_repr
 
     run: FuseRun
     evaluation: Evaluation | None

@@ -3,8 +3,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
-from typing import Literal, NamedTuple, get_args
+import reprlib
+from dataclasses import dataclass, field, fields, is_dataclass, replace
+from typing import Any, Literal, NamedTuple, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -33,11 +34,57 @@ def sensor_kind(kind: SeriesKind) -> SensorKind:
     raise ValueError(f"{kind!r} is not an altitude source's kind")
 
 
+class _Brief(reprlib.Repr):
+    """The repr of a stage's value as a reader at a prompt wants it: an array as its first and
+    last values and its shape, a long dict or tuple cut short, a value nested deeper than
+    three levels as ``...``; where the dataclasses' own repr prints every sample of every
+    sensor (a FlightLog: 126 kB; an evaluation: 420 kB)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.maxlevel = 3
+        self.maxdict = 4
+        self.maxtuple = self.maxlist = 6
+        self.maxstring = self.maxother = 200
+
+    def repr_ndarray(self, x: npt.NDArray[Any], _level: int) -> str:
+        shape = "x".join(map(str, x.shape)) or "scalar"
+        if x.ndim != 1 or x.size == 0:
+            return f"array({shape} {x.dtype})"
+        show = (lambda v: f"{v:.6g}") if x.dtype.kind == "f" else repr
+        head, tail = x[:2].tolist(), x[max(2, x.size - 2) :].tolist()
+        ends = [*map(show, head), *(["..."] if x.size > 4 else []), *map(show, tail)]
+        return f"array([{', '.join(ends)}], {shape} {x.dtype})"
+
+    def repr_instance(self, x: object, level: int) -> str:
+        if is_dataclass(x):
+            names = [f.name for f in fields(x) if f.repr]
+        elif isinstance(x, tuple) and hasattr(x, "_fields"):  # a NamedTuple
+            names = list(x._fields)
+        else:
+            return super().repr_instance(x, level)
+        if level <= 0:
+            return f"{type(x).__name__}(...)"
+        shown = (f"{n}={self.repr1(getattr(x, n), level - 1)}" for n in names)
+        return f"{type(x).__name__}({', '.join(shown)})"
+
+
+def brief_repr(self: object) -> str:
+    """``__repr__`` for the values that hold samples: :class:`_Brief`'s."""
+    return _BRIEF.repr(self)
+
+
+_BRIEF = _Brief()
+
+
 class Samples(NamedTuple):
     """A signal at its own sample times: time [s], value (SI units)."""
 
     t: FloatArray
     value: FloatArray
+
+    def __repr__(self) -> str:
+        return brief_repr(self)
 
 
 @dataclass(frozen=True)
@@ -63,6 +110,8 @@ class Series:
     dropped
         Samples the reader left out, by reason (e.g. ``{"GPS Status < 3": 12}``).
     """
+
+    __repr__ = brief_repr
 
     name: str
     kind: SeriesKind
@@ -113,6 +162,8 @@ def usable_series(
 class Imu:
     """Specific force in the body frame (FRD) [m/s²] of the first IMU."""
 
+    __repr__ = brief_repr
+
     source: str
     t: FloatArray
     acc: FloatArray  # shape (n, 3)
@@ -123,6 +174,8 @@ class Vibration:
     """The accelerometer's quality as the autopilot logs it (VIBE) for the first IMU: the
     vibration levels [m/s²] (the standard deviation of the high-passed acceleration per axis)
     and the cumulative count of samples that clipped at the sensor's range."""
+
+    __repr__ = brief_repr
 
     source: str
     t: FloatArray
@@ -135,6 +188,8 @@ class Attitude:
     """Vehicle attitude [rad], ZYX Euler angles as ArduPilot logs them in ATT; where the log gives
     the rotation as a quaternion (PX4's ``vehicle_attitude.q``: w, x, y, z, body FRD to NED),
     that too, and the rotation comes from it (no Euler round trip)."""
+
+    __repr__ = brief_repr
 
     source: str
     t: FloatArray
@@ -174,6 +229,8 @@ class FlightLog:
     ``sensors`` are the altitude inputs; ``references`` (EKF, AHRS, simulator truth) are
     never fused, only reported and compared against.
     """
+
+    __repr__ = brief_repr
 
     path: str
     sha256: str

@@ -35,7 +35,7 @@ from altfuse.guard import guard
 from altfuse.inertial import referred_vertical_acceleration, velocity_integral
 from altfuse.io import read_log
 from altfuse.memory import release_free_memory
-from altfuse.model import FlightLog, Samples, Series
+from altfuse.model import FlightLog, Samples, Series, brief_repr
 from altfuse.params import Params, param, validate
 from altfuse.screen import rangefinder_param, screen
 from altfuse.steps import Step
@@ -104,6 +104,8 @@ class FuseOptions:
 class FuseRun:
     """The value of every stage of one run, and the provenance record built from them."""
 
+    __repr__ = brief_repr
+
     log: FlightLog
     aligned: Aligned
     referred: Referred
@@ -133,6 +135,8 @@ def _require_sensors(
 @dataclass(frozen=True)
 class Prepared:
     """The method-independent stages of a run: sources tilt-corrected, aligned and referred."""
+
+    __repr__ = brief_repr
 
     log: FlightLog
     sensors: list[Series]  # as aligned: tilt-corrected, each GPS moved by its lag

@@ -13,7 +13,7 @@ import numpy.typing as npt
 
 from altfuse.datum import Track, Wind
 from altfuse.inertial import VerticalAcceleration
-from altfuse.model import FloatArray, Samples, SensorKind, Vibration
+from altfuse.model import FloatArray, Samples, SensorKind, Vibration, brief_repr
 from altfuse.params import Params
 
 #: Per-tick status of the fused value.
@@ -121,6 +121,8 @@ class FusionInput:
         a method's evidence tells one from none.
     """
 
+    __repr__ = brief_repr
+
     t: FloatArray
     z: FloatArray
     names: tuple[str, ...]
@@ -216,6 +218,8 @@ class FusionResult:
     params
         The parameters used, with any value the method chose from the data.
     """
+
+    __repr__ = brief_repr
 
     method: str
     fused: FloatArray
