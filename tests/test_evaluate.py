@@ -215,6 +215,12 @@ def test_a_method_named_twice_is_evaluated_once(tmp_path: Path) -> None:
     assert result.stdout.count("\nmean ") == 1
 
 
+def test_one_method_may_be_named_by_its_name_alone() -> None:
+    """``evaluate(log, "support")``, not its letters as methods ("unknown method 's'")."""
+    result = evaluate(PAPER_A, "support")
+    assert [r.name for r in result.rows if r.kind == "method"] == ["support"]
+
+
 def test_method_that_cannot_run_is_listed() -> None:
     log = shared_log("ardupilot/diaven_sample01.bin")  # no IMU: multilayer cannot run
     result = CliRunner().invoke(cli, ["evaluate", str(log)])

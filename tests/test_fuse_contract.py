@@ -109,6 +109,31 @@ def test_mean_is_the_equal_weight_average() -> None:
     np.testing.assert_allclose(res.weights[1], [0.5, 0.0, 0.5])
 
 
+def test_heights_of_one_sensor_may_be_one_dimensional() -> None:
+    inputs = FusionInput.from_heights(np.array([1.0, np.nan, 3.0]))
+    assert inputs.z.shape == (3, 1)
+    assert inputs.names == ("gps",)
+    np.testing.assert_array_equal(inputs.samples[0].value, [1.0, 3.0])
+
+
+@pytest.mark.parametrize(
+    ("z", "keywords", "message"),
+    [
+        (np.zeros((3, 4, 5)), {}, r"shape \(3, 4, 5\): heights are \(ticks, sensors\)"),
+        (np.zeros((10, 2)), {"dt_s": 0.0}, "dt_s must be a positive number of seconds, got 0"),
+        (np.zeros((10, 2)), {"dt_s": float("nan")}, "dt_s must be a positive number"),
+        (np.zeros((10, 2)), {"kinds": ["gps"]}, r"1 kinds for 2 sensors \(the columns of z\)"),
+        (np.zeros((10, 2)), {"kinds": ["gps", "lidar"]}, "unknown sensor kind 'lidar'; kinds"),
+        (np.zeros((10, 2)), {"accel_up": np.zeros(9)}, r"accel has shape \(9,\) for .* 10 ticks"),
+    ],
+)
+def test_heights_the_methods_cannot_take_are_refused_in_words(
+    z: np.ndarray, keywords: dict[str, object], message: str
+) -> None:
+    with pytest.raises(ValueError, match=message):
+        FusionInput.from_heights(z, **keywords)  # type: ignore[arg-type]
+
+
 #: A new method as a contributor writes it: one module, one registry line.
 TOY_METHOD = """
 from dataclasses import dataclass

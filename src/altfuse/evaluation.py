@@ -316,13 +316,14 @@ def _row(  # noqa: PLR0913 (an estimate, its standard deviation, the truth, its 
 
 def evaluate(
     path: str | Path,
-    methods: Sequence[str] | None = None,
+    methods: str | Sequence[str] | None = None,
     options: FuseOptions | None = None,
     truth: TruthChoice = "auto",
     segments: str | None = None,
 ) -> Evaluation:
-    """Run every method (or those named) on the log at ``path``, each with its parameters in
-    ``options.params`` or its defaults, and measure it, each sensor and the EKF.
+    """Run every method (or those named, or the one named) on the log at ``path``, each with
+    its parameters in ``options.params`` or its defaults, and measure it, each sensor and the
+    EKF.
 
     A method that cannot run on the log (``multilayer`` without IMU) is listed in ``failed``.
     """
@@ -332,7 +333,7 @@ def evaluate(
 
 def evaluate_prepared(
     prepared: Prepared,
-    methods: Sequence[str] | None = None,
+    methods: str | Sequence[str] | None = None,
     options: FuseOptions | None = None,
     truth: TruthChoice = "auto",
     segments: str | None = None,
@@ -344,7 +345,7 @@ def evaluate_prepared(
     are those the evaluation would run it with.
     """
     options = options or FuseOptions()
-    methods = list(methods or METHODS)
+    methods = [methods] if isinstance(methods, str) else list(methods or METHODS)
     for name in methods:
         method(name)
     reference = choose_truth(prepared.log, prepared.referred, truth)

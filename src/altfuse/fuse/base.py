@@ -176,14 +176,26 @@ class FusionInput:
         names: Sequence[str] | None = None,
         accel_up: FloatArray | None = None,
     ) -> FusionInput:
-        """Heights already on a clock ``k dt_s``: each sensor's samples are its valid ticks.
-        ``kinds`` default to gps, baro, rangefinder, gps, ... in turn; ``names`` to the kinds,
-        numbered from the second of a kind on (``gps2``), as the readers name them;
-        ``accel_up`` [m/s², up, at rest 0] is the vertical acceleration at the ticks."""
+        """Heights already on a clock ``k dt_s``: ``z`` has a row per tick and a column per
+        sensor (one sensor's heights may be given as a 1-D array); each sensor's samples are its
+        valid ticks. ``kinds`` default to gps, baro, rangefinder, gps, ... in turn; ``names`` to
+        the kinds, numbered from the second of a kind on (``gps2``), as the readers name them;
+        ``accel_up`` [m/s², up, at rest 0] is the vertical acceleration at the ticks.
+        ValueError for a shape, a tick or a kind that is none of these."""
         z = np.asarray(z, dtype=np.float64)
+        if z.ndim == 1:
+            z = z[:, np.newaxis]
+        if z.ndim != 2:
+            raise ValueError(f"z has shape {z.shape}: heights are (ticks, sensors)")
+        if not (np.isfinite(dt_s) and dt_s > 0):
+            raise ValueError(f"dt_s must be a positive number of seconds, got {dt_s}")
         t = np.asarray(np.arange(z.shape[0]) * dt_s, dtype=np.float64)
         cycle: tuple[SensorKind, ...] = ("gps", "baro", "rangefinder")
         kinds = tuple(kinds or [cycle[i % 3] for i in range(z.shape[1])])
+        if len(kinds) != z.shape[1]:
+            raise ValueError(f"{len(kinds)} kinds for {z.shape[1]} sensors (the columns of z)")
+        if unknown := [k for k in kinds if k not in cycle]:
+            raise ValueError(f"unknown sensor kind {unknown[0]!r}; kinds are {', '.join(cycle)}")
         if names is None:
             seen = [kinds[:i].count(k) for i, k in enumerate(kinds)]
             names = [k if c == 0 else f"{k}{c + 1}" for k, c in zip(kinds, seen, strict=True)]
@@ -192,6 +204,7 @@ class FusionInput:
         samples = tuple(Samples(t[ok[:, i]], z[ok[:, i], i]) for i in range(z.shape[1]))
         accel = None
         if accel_up is not None:
+            accel_up = np.asarray(accel_up, dtype=np.float64)
             record = {"source": "given at the clock's ticks"}
             accel = VerticalAcceleration(Samples(t, accel_up), accel_up, record)
         return cls(t, z, names, kinds, samples, dt_s, accel=accel)
