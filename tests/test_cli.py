@@ -641,7 +641,7 @@ def test_an_end_of_input_within_a_command_is_an_error_not_an_interruption(
 
     from altfuse import commands
 
-    def damaged(*_args: object) -> None:
+    def damaged(*_args: object, **_keywords: object) -> None:
         raise EOFError("Ran out of input")
 
     monkeypatch.setattr(commands, "fuse_to_files", damaged)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from altfuse.errors import UnsupportedLogError
+from altfuse.errors import AltfuseError, UnsupportedLogError
 from altfuse.fuse import method
 from altfuse.info import damage
 from altfuse.io import read_log
@@ -117,3 +117,27 @@ def test_a_fused_run_written_keeps_only_its_sensors_of_the_log(tmp_path: Path) -
     assert log.temperatures == {}
     assert damage(log) == damage(screen(full))
     assert [s.name for s in log.sensors] == [s.name for s in screen(full).sensors]
+
+
+def test_the_library_job_never_writes_over_its_log(tmp_path: Path) -> None:
+    """``fuse_to_files(log, Outputs(log))`` replaced the log with its own fused table: the
+    command line refused it, the library did not. Existing files are replaced unless told not."""
+    log = tmp_path / "flight.bin"
+    log.write_bytes(SAMPLE_LOG.read_bytes())
+    for outputs in (
+        Outputs(log),
+        Outputs(tmp_path / "o.csv", meta=log),
+        Outputs(tmp_path / "o.csv", weights=tmp_path / "o.csv"),
+        Outputs(tmp_path / "o.json"),
+    ):
+        with pytest.raises(AltfuseError):  # ParameterError, or OutputError for the format
+            fuse_to_files(log, outputs)
+    assert log.read_bytes() == SAMPLE_LOG.read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["flight.bin"]
+    old = tmp_path / "o.csv"
+    old.write_text("an earlier run\n")
+    with pytest.raises(AltfuseError, match=r"o\.csv exists"):
+        fuse_to_files(log, Outputs(old), overwrite=False)
+    assert old.read_text() == "an earlier run\n"
+    fuse_to_files(log, Outputs(old))
+    assert old.read_text().startswith("time_s,")

@@ -342,7 +342,7 @@ def fuse(
             log.name, "standard output" if output == STDOUT else output,
         )  # fmt: skip
     with _progress_line():
-        done = fuse_to_files(log, outputs, opts)
+        done = fuse_to_files(log, outputs, opts, overwrite=force)
     run = done.run
     for note in run.log.notes:
         logging.getLogger("altfuse").info("%s", note)

@@ -104,13 +104,17 @@ def fuse_to_files(
     outputs: Outputs,
     options: FuseOptions | None = None,
     label: str | None = None,
+    overwrite: bool = True,
 ) -> FileRun:
     """Read, fuse and write one log: the CSV, the sidecar and the optional files, all or none.
 
     ``label`` names the log in the figure's title (default: its file name). With
     ``outputs.evaluation``, every method is evaluated too (the run made here is reused for its
-    own method).
+    own method). Outputs that would overwrite the log or each other, and tables named as
+    another format, are refused before the log is read (:meth:`Outputs.refuse`); existing
+    files are replaced unless ``overwrite`` is False.
     """
+    outputs.refuse(Path(path), force=overwrite)
     options = options or FuseOptions()
     prepared = prepare_log(path, options)
     inputs = None
