@@ -368,9 +368,11 @@ def _write(path: Path, scenario: str, faults: list[str]) -> Path:
 @pytest.mark.parametrize(
     ("args", "fragment"),
     [
-        (["mission", "--duration", "5"], "--duration"),
+        (["mission", "--duration", "5"], "--duration must be from 60 s (for mission) to 43200 s"),
         # 11.6 days (1e6 s) ran out of a 24 GB machine's memory, killed without a word
-        (["hover", "--duration", "1e7"], "--duration must be at most 43200 s (12 hours)"),
+        (["hover", "--duration", "1e7"], "to 43200 s (12 hours), got 1e+07"),
+        (["hover", "--duration", "inf"], "to 43200 s (12 hours), got inf"),  # was "at least"
+        (["hover", "--duration", "nan"], "--duration must be from"),
         (["orbit"], "'orbit' is not one of"),
         (["hover", "--fault", "ice"], "'ice' is not one of"),
         (["hover", "--seed", "-1"], "'--seed': -1 is not in the range x>=0"),  # numpy's error

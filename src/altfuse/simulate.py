@@ -415,14 +415,11 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         raise ParameterError(f"unknown scenario {scenario!r}; choose one of {', '.join(SCENARIOS)}")
     spec = SCENARIOS[scenario]
     duration = spec.default_duration_s if duration_s is None else float(duration_s)
-    if not (np.isfinite(duration) and duration >= spec.min_duration_s):
+    if not spec.min_duration_s <= duration <= MAX_DURATION_S:  # and not NaN
         raise InvalidParameter(
             "duration_s",
-            f"must be at least {spec.min_duration_s:g} s for {scenario}, got {duration}",
-        )
-    if duration > MAX_DURATION_S:
-        raise InvalidParameter(
-            "duration_s", f"must be at most {MAX_DURATION_S:g} s (12 hours), got {duration:g}"
+            f"must be from {spec.min_duration_s:g} s (for {scenario}) to {MAX_DURATION_S:g} s"
+            f" (12 hours), got {duration:g}",
         )
     unknown = [f for f in faults if f not in FAULTS]
     if unknown:
