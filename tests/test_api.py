@@ -92,3 +92,18 @@ def test_a_run_s_repr_at_a_prompt_is_a_summary_not_every_sample() -> None:
     assert f"status=array([{str(status[0])!r}, {str(status[1])!r}, ...," in repr(run.result)
     many = dataclasses.replace(run.log, params={f"P{i:03}": float(i) for i in range(900)})
     assert "params={'P000': 0.0, 'P001': 1.0, 'P002': 2.0, 'P003': 3.0, ...}" in repr(many)
+
+
+def test_a_log_already_read_and_changed_is_fused_and_evaluated_as_given() -> None:
+    """An experiment: read a log, leave a sensor out, fuse and measure what is left."""
+    log = altfuse.read_log(SAMPLE_LOG)
+    as_read = altfuse.fuse_log(log, altfuse.FuseOptions(method="support"))
+    from_file = altfuse.fuse_log(SAMPLE_LOG, altfuse.FuseOptions(method="support"))
+    np.testing.assert_array_equal(as_read.result.fused, from_file.result.fused)
+    without_gps = dataclasses.replace(log, sensors=tuple(s for s in log.sensors if s.kind != "gps"))
+    report = altfuse.evaluate(without_gps, ["support"])
+    assert [r.name for r in report.rows] == ["support", "baro", "rangefinder"]
+    assert report.truth.name == "sim"
+    table = altfuse.fuse_file(without_gps, method="mean")
+    assert "alt_gps_m" not in table.columns
+    assert "alt_gps_m" in altfuse.fuse_file(log, method="mean").columns

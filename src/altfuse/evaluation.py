@@ -315,15 +315,15 @@ def _row(  # noqa: PLR0913 (an estimate, its standard deviation, the truth, its 
 
 
 def evaluate(
-    path: str | Path,
+    path: str | Path | FlightLog,
     methods: str | Sequence[str] | None = None,
     options: FuseOptions | None = None,
     truth: TruthChoice = "auto",
     segments: str | None = None,
 ) -> Evaluation:
-    """Run every method (or those named, or the one named) on the log at ``path``, each with
-    its parameters in ``options.params`` or its defaults, and measure it, each sensor and the
-    EKF.
+    """Run every method (or those named, or the one named) on the log at ``path`` (or the one
+    given, already read), each with its parameters in ``options.params`` or its defaults, and
+    measure it, each sensor and the EKF.
 
     A method that cannot run on the log (``multilayer`` without IMU) is listed in ``failed``.
     """

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 from altfuse.evaluation import Evaluation, evaluate_prepared, truth_or_none
 from altfuse.fuse import DEFAULT_METHOD, method, params_for
 from altfuse.memory import release_free_memory
-from altfuse.model import brief_repr
+from altfuse.model import FlightLog, brief_repr
 from altfuse.params import fields
 from altfuse.pipeline import (
     FuseOptions,
@@ -145,9 +145,14 @@ def fuse_to_files(
 
 
 def fuse_file(
-    path: str | Path, method: str = DEFAULT_METHOD, *, time_index: bool = False, **values: Any
+    path: str | Path | FlightLog,
+    method: str = DEFAULT_METHOD,
+    *,
+    time_index: bool = False,
+    **values: Any,
 ) -> pd.DataFrame:
-    """The fused table of the log at ``path``, as ``altfuse fuse`` writes it to CSV.
+    """The fused table of the log at ``path`` (or of the one given, already read), as ``altfuse
+    fuse`` writes it to CSV.
 
     ``values`` are the pipeline's options (:class:`FuseOptions`: ``rate_hz``, ``max_gap_s``, ...)
     and the method's parameters (``alpha_per_m2`` for ``support``, ...), by name. Columns:

@@ -372,8 +372,11 @@ def run_method(
     )
 
 
-def prepare_log(path: str | Path, options: FuseOptions) -> Prepared:
-    """Read the log at ``path`` and :func:`prepare` it."""
+def prepare_log(path: str | Path | FlightLog, options: FuseOptions) -> Prepared:
+    """Read the log at ``path`` and :func:`prepare` it; a log already read (:func:`read_log`'s,
+    changed as an experiment wants: a sensor left out, a bias added) is prepared as it is."""
+    if isinstance(path, FlightLog):
+        return prepare(path, options)
     started = time.perf_counter()
     progress.info("%s: reading", Path(path).name)
     flight = read_log(path)
@@ -390,8 +393,9 @@ def prepare_log(path: str | Path, options: FuseOptions) -> Prepared:
     return prepared
 
 
-def fuse_log(path: str | Path, options: FuseOptions | None = None) -> FuseRun:
-    """Read the log at ``path`` and fuse its altitude sources (the ``altfuse fuse`` job)."""
+def fuse_log(path: str | Path | FlightLog, options: FuseOptions | None = None) -> FuseRun:
+    """Read the log at ``path`` (or take the one given) and fuse its altitude sources (the
+    ``altfuse fuse`` job)."""
     options = options or FuseOptions()
     return run_method(prepare_log(path, options), options)
 
