@@ -101,9 +101,17 @@ def test_a_log_already_read_and_changed_is_fused_and_evaluated_as_given() -> Non
     from_file = altfuse.fuse_log(SAMPLE_LOG, altfuse.FuseOptions(method="support"))
     np.testing.assert_array_equal(as_read.result.fused, from_file.result.fused)
     without_gps = dataclasses.replace(log, sensors=tuple(s for s in log.sensors if s.kind != "gps"))
-    report = altfuse.evaluate(without_gps, ["support"])
-    assert [r.name for r in report.rows] == ["support", "baro", "rangefinder"]
+    report = altfuse.evaluate(without_gps, ["support", "smoother"])
     assert report.truth.name == "sim"
+    table = report.table()
+    assert list(table.name) == ["support", "smoother", "baro", "rangefinder"]
+    assert list(table.columns) == [
+        "name", "kind", "segment", "n", "rmse", "mae", "max_abs", "bias", "within_2std"
+    ]  # fmt: skip
+    smoother = report.rows[1].overall
+    assert table.rmse[1] == smoother.rmse
+    assert table.within_2std[1] == smoother.within_2std
+    assert np.isnan(table.within_2std[0])  # support gives no standard deviation
     table = altfuse.fuse_file(without_gps, method="mean")
     assert "alt_gps_m" not in table.columns
     assert "alt_gps_m" in altfuse.fuse_file(log, method="mean").columns

@@ -30,7 +30,7 @@ from altfuse.batch import (
     run_batch,
     summary_name,
 )
-from altfuse.evaluation import TRUTHS, Evaluation, TruthChoice, evaluation_table
+from altfuse.evaluation import TRUTHS, Evaluation, TruthChoice
 from altfuse.evaluation import evaluate as evaluate_log
 from altfuse.files import is_stream
 from altfuse.fuse import DEFAULT_METHOD, METHODS, params_by_method
@@ -533,7 +533,7 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
         if json_path is not None:
             stage(json_path, write_json(result.as_dict()))
         if csv_path is not None:
-            stage(csv_path, lambda f: evaluation_table(result).to_csv(f, index=False))
+            stage(csv_path, lambda f: result.table().to_csv(f, index=False))
         if plot_path is not None and result.runs:
             fused = {m: r.result.fused for m, r in result.runs.items()}
             best = result.best()

@@ -110,6 +110,20 @@ class Evaluation:
             "diverged": self.diverged(),
         }
 
+    def table(self) -> pd.DataFrame:
+        """One row per estimate (method, sensor, the onboard EKF) and segment (``all`` for the
+        whole flight): its RMSE, MAE, maximum error, bias and share within its own ±2σ (NaN
+        where it gives no σ) [m], and how many ticks were measured."""
+        import pandas as pd
+
+        records = [
+            {"name": row.name, "kind": row.kind, "segment": segment, **stats.as_dict()}
+            for row in self.rows
+            for segment, stats in {"all": row.overall, **row.segments}.items()
+        ]
+        table: pd.DataFrame = pd.DataFrame.from_records(records)
+        return table
+
     def diverged(self) -> dict[str, dict[str, Any]]:
         """Each method run whose fused value left every sensor (:mod:`altfuse.guard`): its
         flagged ticks and largest excursion [m]."""
@@ -371,17 +385,3 @@ def evaluate_prepared(
             _row("ekf", "onboard", _on_clock(ekf, prepared.referred), reference.h, t, spans)
         )
     return Evaluation(prepared, reference, tuple(rows), runs, failed, spans)
-
-
-def evaluation_table(result: Evaluation) -> pd.DataFrame:
-    """One row per estimate and segment (``all`` for the whole flight), for scripts."""
-    import pandas as pd
-
-    records = []
-    for row in result.rows:
-        for segment, stats in {"all": row.overall, **row.segments}.items():
-            records.append(
-                {"name": row.name, "kind": row.kind, "segment": segment, **stats.as_dict()}
-            )
-    table: pd.DataFrame = pd.DataFrame.from_records(records)
-    return table
