@@ -136,7 +136,7 @@ def test_the_library_job_never_writes_over_its_log(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["flight.bin"]
     old = tmp_path / "o.csv"
     old.write_text("an earlier run\n")
-    with pytest.raises(AltfuseError, match=r"o\.csv exists"):
+    with pytest.raises(AltfuseError, match=r"o\.csv exists; overwrite=True overwrites it$"):
         fuse_to_files(log, Outputs(old), overwrite=False)
     assert old.read_text() == "an earlier run\n"
     fuse_to_files(log, Outputs(old))

@@ -71,18 +71,19 @@ class Outputs:
         optional = (table, self.meta_path, self.weights, self.plot, self.evaluation)
         return [p for p in optional if p is not None]
 
-    def refuse(self, log_path: Path, force: bool = False) -> None:
+    def refuse(self, log_path: Path, force: bool = False, remedy: str = "--force") -> None:
         """Refuse outputs that would overwrite the input log or each other, tables named as
         another format (:func:`altfuse.write.check_table_path`), existing files unless
-        ``force`` (:func:`altfuse.write.check_paths`), and a table for a standard output that
-        is closed (``-o - >&-``: Python's ``sys.stdout`` is None)."""
+        ``force`` (:func:`altfuse.write.check_paths`; ``remedy``: what sets it, for the
+        message), and a table for a standard output that is closed (``-o - >&-``: Python's
+        ``sys.stdout`` is None)."""
         if self.csv == STDOUT and sys.stdout is None:
             raise OutputError("-: standard output is closed; name a file with -o")
         check_paths(self.paths(), [log_path])
         for table in (self.csv, self.weights):
             if table is not None:
                 check_table_path(table)
-        refuse_existing(force, *self.paths())
+        refuse_existing(force, *self.paths(), remedy=remedy)
 
 
 @dataclass(frozen=True)
@@ -114,7 +115,7 @@ def fuse_to_files(
     another format, are refused before the log is read (:meth:`Outputs.refuse`); existing
     files are replaced unless ``overwrite`` is False.
     """
-    outputs.refuse(Path(path), force=overwrite)
+    outputs.refuse(Path(path), force=overwrite, remedy="overwrite=True")
     options = options or FuseOptions()
     prepared = prepare_log(path, options)
     inputs = None

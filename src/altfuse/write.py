@@ -516,12 +516,13 @@ def _undo(done: Sequence[tuple[str, Path, str | None]]) -> None:
                 os.replace(backup, target)
 
 
-def refuse_existing(force: bool, *paths: Path | None) -> None:
-    """An existing output is never overwritten without ``force`` (``--force``); a stream
-    (:func:`is_stream`) is written into, not overwritten."""
+def refuse_existing(force: bool, *paths: Path | None, remedy: str = "--force") -> None:
+    """An existing output is never overwritten without ``force`` (``--force``, or the
+    ``remedy`` the caller offers); a stream (:func:`is_stream`) is written into, not
+    overwritten."""
     for path in paths:
         if not force and path is not None and os.path.lexists(path) and not is_stream(path):
-            raise ParameterError(f"{path} exists; --force overwrites it")
+            raise ParameterError(f"{path} exists; {remedy} overwrites it")
 
 
 def write_json(data: Any) -> Writer:
