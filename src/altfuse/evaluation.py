@@ -112,8 +112,8 @@ class Evaluation:
 
     def table(self) -> pd.DataFrame:
         """One row per estimate (method, sensor, the onboard EKF) and segment (``all`` for the
-        whole flight): its RMSE, MAE, maximum error, bias and share within its own ±2σ (NaN
-        where it gives no σ) [m], and how many ticks were measured."""
+        whole flight): how many ticks were measured (``n``), its RMSE, MAE, maximum error and
+        bias [m], and the share of its errors within its own ±2σ (NaN where it gives no σ)."""
         import pandas as pd
 
         records = [
