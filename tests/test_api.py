@@ -8,12 +8,15 @@ import io
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from click.testing import CliRunner
 
 import altfuse
+from altfuse.cli import cli
 from altfuse.params import InvalidParameter
 from conftest import ROOT, SAMPLE_LOG
 
@@ -115,3 +118,20 @@ def test_a_log_already_read_and_changed_is_fused_and_evaluated_as_given() -> Non
     table = altfuse.fuse_file(without_gps, method="mean")
     assert "alt_gps_m" not in table.columns
     assert "alt_gps_m" in altfuse.fuse_file(log, method="mean").columns
+
+
+def test_a_simulated_flight_from_python_is_the_command_s_log(tmp_path: Path) -> None:
+    """``simulate_flight`` and ``write_simulated_log`` write the log ``altfuse simulate``
+    writes; one fault may be named alone."""
+    flight = altfuse.simulate_flight("hover", 2, faults="gps-glitch")
+    assert flight.faults == ("gps-glitch",)
+    assert len(repr(flight)) < 3000  # its records and truth summarised
+    ours = tmp_path / "ours.bin"
+    altfuse.write_simulated_log(flight, ours)
+    theirs = tmp_path / "theirs.bin"
+    args = ["simulate", "hover", "--seed", "2", "--fault", "gps-glitch", "-o", str(theirs)]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    assert ours.read_bytes() == theirs.read_bytes()
+    report = altfuse.evaluate(ours, "smoother")
+    assert report.truth.name == "sim"
+    assert report.table().rmse[0] < 0.5

@@ -12,7 +12,9 @@ The public face is what ``__all__`` names::
     table = altfuse.fuse_file("flight.bin", method="support", alpha_per_m2=0.5)
 
 :func:`fuse_log` runs the chain and builds the provenance record, :func:`fuse_to_files` writes
-what ``altfuse fuse`` writes, :func:`evaluate` measures every method against the truth.
+what ``altfuse fuse`` writes, :func:`evaluate` measures every method against the truth;
+:func:`simulate_flight` and :func:`write_simulated_log` make a log with its truth, as
+``altfuse simulate`` does.
 Names are imported on first use, so that ``import altfuse`` (and the command line's start-up)
 does not pay for numpy, scipy and pandas until they are needed.
 """
@@ -40,6 +42,8 @@ _PUBLIC = {
     "FusionResult": "altfuse.fuse",
     "FlightLog": "altfuse.model",
     "AltfuseError": "altfuse.errors",
+    "simulate_flight": "altfuse.simulate",
+    "write_simulated_log": "altfuse.simulate",
 }
 
 __all__ = [
@@ -58,6 +62,8 @@ __all__ = [
     "fuse_log",
     "fuse_to_files",
     "read_log",
+    "simulate_flight",
+    "write_simulated_log",
 ]
 
 if TYPE_CHECKING:
@@ -68,6 +74,7 @@ if TYPE_CHECKING:
     from altfuse.job import Outputs, fuse_file, fuse_to_files
     from altfuse.model import FlightLog
     from altfuse.pipeline import FuseOptions, FuseRun, fuse_log
+    from altfuse.simulate import simulate_flight, write_simulated_log
 
 
 def __getattr__(name: str) -> Any:

@@ -63,7 +63,7 @@ from altfuse import __version__
 from altfuse.errors import ParameterError
 from altfuse.inertial import G
 from altfuse.io.dataflash import EV_EKF_ALT_RESET
-from altfuse.model import FloatArray
+from altfuse.model import FloatArray, brief_repr
 from altfuse.params import InvalidParameter
 from altfuse.write import atomic_outputs
 
@@ -90,6 +90,8 @@ Records = dict[str, list[tuple[float, tuple[object, ...]]]]
 @dataclass(frozen=True)
 class Profile:
     """The truth of one flight on the ``DT_S`` clock, and how noisy each sensor is when."""
+
+    __repr__ = brief_repr
 
     t: FloatArray
     height_m: FloatArray  # above the take-off point
@@ -379,6 +381,8 @@ class SimulatedFlight:
     """The truth on the ``DT_S`` clock, the records to log by type, and how far the sensors lag
     the truth [s]: every one (``latency_s``), the GPS (``gps_lag_s``, the latency included)."""
 
+    __repr__ = brief_repr
+
     scenario: str
     seed: int
     duration_s: float
@@ -408,9 +412,11 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     scenario: str = "mission",
     seed: int = 0,
     duration_s: float | None = None,
-    faults: Sequence[str] = (),
+    faults: str | Sequence[str] = (),
 ) -> SimulatedFlight:
-    """Simulate ``scenario`` and its sensors (see the module doc)."""
+    """Simulate ``scenario`` and its sensors (see the module doc), with ``faults`` (one fault's
+    name, or several)."""
+    faults = (faults,) if isinstance(faults, str) else tuple(faults)
     if scenario not in SCENARIOS:
         raise ParameterError(f"unknown scenario {scenario!r}; choose one of {', '.join(SCENARIOS)}")
     spec = SCENARIOS[scenario]
@@ -580,7 +586,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     roll_logged = np.where(np.abs(roll_logged) > 180.0, wrapped, roll_logged)
     log("ATT", ts, roll_logged, np.rad2deg(sensed(ts, p.pitch)), 0.0)
     log("SIM", ts, HOME_AMSL_M + truth(ts, p.height_m))
-    return SimulatedFlight(scenario, seed, duration, tuple(faults), p, records, latency, gps_lag)
+    return SimulatedFlight(scenario, seed, duration, faults, p, records, latency, gps_lag)
 
 
 _TYPES = {
