@@ -487,8 +487,8 @@ def test_a_log_that_runs_out_of_memory_fails_saying_so(
     def short(*_args: object, **_kwargs: object) -> object:
         raise MemoryError("Unable to allocate 118. MiB for an array")
 
-    monkeypatch.setattr(commands, "fuse_to_files", short)
-    monkeypatch.setattr(batch_module, "fuse_to_files", short)
+    monkeypatch.setattr(commands, "run_to_files", short)
+    monkeypatch.setattr(batch_module, "run_to_files", short)
     result = CliRunner().invoke(
         cli, ["fuse", str(SAMPLES / "mission.bin"), "-o", str(tmp_path / "f.csv")]
     )

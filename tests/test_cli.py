@@ -641,10 +641,10 @@ def test_an_end_of_input_within_a_command_is_an_error_not_an_interruption(
 
     from altfuse import commands
 
-    def damaged(*_args: object, **_keywords: object) -> None:
+    def damaged(*_args: object) -> None:
         raise EOFError("Ran out of input")
 
-    monkeypatch.setattr(commands, "fuse_to_files", damaged)
+    monkeypatch.setattr(commands, "run_to_files", damaged)
     result = run("fuse", SAMPLE_LOG, "-o", tmp_path / "f.csv")
     assert_one_line_error(result, 3, "internal error: EOFError: Ran out of input")
 

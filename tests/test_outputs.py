@@ -711,13 +711,13 @@ def test_a_python_warning_is_never_a_second_stderr_line(
 
     from altfuse import commands as cli_module
 
-    original = cli_module.fuse_to_files
+    original = cli_module.run_to_files
 
     def noisy(*args: object, **kwargs: object) -> object:
         warnings.warn("invalid value encountered in divide", RuntimeWarning, stacklevel=1)
         return original(*args, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(cli_module, "fuse_to_files", noisy)
+    monkeypatch.setattr(cli_module, "run_to_files", noisy)
     result = run("fuse", SAMPLE_LOG, "-o", tmp_path / "out.csv")
     assert result.exit_code == 0
     assert "RuntimeWarning" not in result.stderr

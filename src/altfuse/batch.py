@@ -43,7 +43,7 @@ from altfuse import __version__
 from altfuse.errors import AltfuseError, LogReadError, ParameterError, Refusal, out_of_memory
 from altfuse.files import COMPRESSIONS, compression_named, stream_kind
 from altfuse.io import sha256_of
-from altfuse.job import FileRun, Outputs, fuse_to_files
+from altfuse.job import FileRun, Outputs, run_to_files
 from altfuse.memory import one_heap
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
@@ -405,7 +405,7 @@ def process(job: Job, options: BatchOptions) -> LogResult:
         message = f"{existing[0]} exists, {kept}: --force redoes it"
         return LogResult(name, "failed", message, processing_s=time.perf_counter() - started)
     try:
-        done = fuse_to_files(job.log, outputs, options.fuse, label=str(job.relative))
+        done = run_to_files(job.log, outputs, options.fuse, label=str(job.relative))
         return _described(name, done, time.perf_counter() - started)
     except Refusal as exc:
         seconds = time.perf_counter() - started

@@ -36,7 +36,7 @@ from altfuse.files import is_stream
 from altfuse.fuse import DEFAULT_METHOD, METHODS, params_by_method
 from altfuse.info import as_text, damage, describe
 from altfuse.io import read_log
-from altfuse.job import Outputs, fuse_to_files
+from altfuse.job import Outputs, run_to_files
 from altfuse.metrics import ErrorStats
 from altfuse.params import UNIT_SUFFIXES, InvalidParameter, fields, flag_of, hints, unit_of
 from altfuse.pipeline import FuseOptions
@@ -342,7 +342,7 @@ def fuse(
             log.name, "standard output" if output == STDOUT else output,
         )  # fmt: skip
     with _progress_line():
-        done = fuse_to_files(log, outputs, opts, overwrite=force)
+        done = run_to_files(log, outputs, opts)
     run = done.run
     for note in run.log.notes:
         logging.getLogger("altfuse").info("%s", note)

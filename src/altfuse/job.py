@@ -1,5 +1,6 @@
 """The jobs as library calls: a log to a table (:func:`fuse_file`), a log to its files
-(:func:`fuse_to_files`, what ``altfuse fuse`` and each log of ``altfuse batch`` run)."""
+(:func:`fuse_to_files`; :func:`run_to_files`, what ``altfuse fuse`` and each log of ``altfuse
+batch`` run)."""
 
 from __future__ import annotations
 
@@ -107,15 +108,28 @@ def fuse_to_files(
     label: str | None = None,
     overwrite: bool = True,
 ) -> FileRun:
-    """Read, fuse and write one log: the CSV, the sidecar and the optional files, all or none.
+    """Read, fuse and write one log: the CSV, the sidecar and the optional files, all or none
+    (:func:`run_to_files`). Outputs that would overwrite the log or each other, and tables
+    named as another format, are refused before the log is read (:meth:`Outputs.refuse`);
+    existing files are replaced unless ``overwrite`` is False."""
+    outputs.refuse(Path(path), force=overwrite, remedy="overwrite=True")
+    return run_to_files(path, outputs, options, label)
+
+
+def run_to_files(
+    path: str | Path,
+    outputs: Outputs,
+    options: FuseOptions | None = None,
+    label: str | None = None,
+) -> FileRun:
+    """:func:`fuse_to_files` for a caller that has refused its outputs itself: ``altfuse fuse``
+    (:meth:`Outputs.refuse`, before its warnings) and each log of a batch (whose outputs it
+    names and checks as a whole).
 
     ``label`` names the log in the figure's title (default: its file name). With
     ``outputs.evaluation``, every method is evaluated too (the run made here is reused for its
-    own method). Outputs that would overwrite the log or each other, and tables named as
-    another format, are refused before the log is read (:meth:`Outputs.refuse`); existing
-    files are replaced unless ``overwrite`` is False.
+    own method).
     """
-    outputs.refuse(Path(path), force=overwrite, remedy="overwrite=True")
     options = options or FuseOptions()
     prepared = prepare_log(path, options)
     inputs = None

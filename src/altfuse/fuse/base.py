@@ -13,7 +13,7 @@ import numpy.typing as npt
 
 from altfuse.datum import Track, Wind
 from altfuse.inertial import VerticalAcceleration
-from altfuse.model import FloatArray, Samples, SensorKind, Vibration, brief_repr
+from altfuse.model import SENSOR_KINDS, FloatArray, Samples, SensorKind, Vibration, brief_repr
 from altfuse.params import Params
 
 #: Per-tick status of the fused value.
@@ -194,8 +194,9 @@ class FusionInput:
         kinds = tuple(kinds or [cycle[i % 3] for i in range(z.shape[1])])
         if len(kinds) != z.shape[1]:
             raise ValueError(f"{len(kinds)} kinds for {z.shape[1]} sensors (the columns of z)")
-        if unknown := [k for k in kinds if k not in cycle]:
-            raise ValueError(f"unknown sensor kind {unknown[0]!r}; kinds are {', '.join(cycle)}")
+        if unknown := [k for k in kinds if k not in SENSOR_KINDS]:
+            known = ", ".join(SENSOR_KINDS)
+            raise ValueError(f"unknown sensor kind {unknown[0]!r}; kinds are {known}")
         if names is None:
             seen = [kinds[:i].count(k) for i, k in enumerate(kinds)]
             names = [k if c == 0 else f"{k}{c + 1}" for k, c in zip(kinds, seen, strict=True)]
