@@ -24,7 +24,15 @@ from threadpoolctl import threadpool_info
 
 from altfuse import __version__
 from altfuse import batch as batch_module
-from altfuse.batch import EXIT_PARTIAL, BatchOptions, _worker_start, find_logs, run_batch
+from altfuse.batch import (
+    EXIT_PARTIAL,
+    BatchOptions,
+    LogResult,
+    _worker_start,
+    doubted,
+    find_logs,
+    run_batch,
+)
 from altfuse.cli import cli
 from altfuse.errors import LogReadError, ParameterError
 from altfuse.evaluation import evaluate
@@ -57,7 +65,11 @@ def test_batch_over_the_shared_logs_refuses_the_unfusable_and_exits_0(tmp_path: 
     out = tmp_path / "out"
     result = CliRunner().invoke(cli, ["batch", str(folder), "-o", str(out), "--jobs", "2"])
     assert result.exit_code == 0, result.output
-    assert result.stderr == ""  # no progress bar when stderr is not a terminal
+    # no progress bar when stderr is not a terminal; one line on the log that needs a look
+    assert result.stderr == (
+        "altfuse: warning: 1 of the 8 logs fused need a look (the summary's diverged and "
+        "model_check columns): rima48_test_cascade.BIN (model check failed)\n"
+    )
     summary = pd.read_csv(out / "summary.csv", keep_default_na=False)
     assert len(summary) == 11
     assert set(summary.status) == {"ok", "refused"}
@@ -103,6 +115,34 @@ def test_batch_over_the_shared_logs_refuses_the_unfusable_and_exits_0(tmp_path: 
         assert (out / f"{stem}.meta.json").exists()
     assert not list(out.glob(f"{Path('ardusubtools_small').name}*"))
     assert "11 logs, ok 8, refused 3, skipped 0, failed 0" in result.stdout
+
+
+def test_the_logs_that_need_a_look_are_named_in_one_line() -> None:
+    """The end of a batch names the logs fused now that ``fuse`` would have warned of: those
+    the guard flagged and those whose model check failed, by name, three at most; not a log
+    refused, failed or skipped, nor one whose check passed or was not run (not the smoother)."""
+    failed_check = "failed: mean squared normalised innovation gps 2.78"
+    results = [
+        LogResult("e.bin", "ok", diverged=12),
+        LogResult("a.bin", "ok", model_check="passed"),
+        LogResult("d.bin", "ok", diverged=3, model_check=failed_check),
+        LogResult("b.ulg", "ok", model_check=failed_check),
+        LogResult("f.bin", "ok", diverged=1),
+        LogResult("c.bin", "ok"),  # a method without a model check
+        LogResult("g.bin", "refused", "1 usable altitude source"),
+        LogResult("h.bin", "failed", "cannot read", diverged=5),
+        LogResult("i.bin", "skipped"),
+    ]
+    assert doubted(results) == (
+        "4 of the 6 logs fused need a look (the summary's diverged and model_check columns): "
+        "b.ulg (model check failed); d.bin (diverged on 3 ticks, model check failed); "
+        "e.bin (diverged on 12 ticks); and 1 more"
+    )
+    assert doubted(results[4:]) == (
+        "1 of the 2 logs fused need a look (the summary's diverged and model_check columns): "
+        "f.bin (diverged on 1 ticks)"
+    )
+    assert doubted([results[1], results[5], *results[6:]]) is None
 
 
 def test_all_ok_exits_0_and_mirrors_the_tree(tmp_path: Path) -> None:

@@ -165,6 +165,27 @@ class LogResult:
     truth: str = ""
     metrics: dict[str, float | None] = field(default_factory=dict)
 
+    def doubts(self) -> list[str]:
+        """What puts this log's fused altitude in question, as ``fuse`` warns of it: the ticks
+        the guard flagged, the model's own check failed."""
+        found = [f"diverged on {self.diverged} ticks"] if self.diverged else []
+        return found + (["model check failed"] if self.model_check.startswith("failed") else [])
+
+
+def doubted(results: Sequence[LogResult]) -> str | None:
+    """One line naming the logs fused now whose outputs need a look (:meth:`LogResult.doubts`),
+    the first three with why, for the end of a batch; None where there are none. A log skipped
+    now was named by the run that fused it."""
+    fused = sorted((r for r in results if r.status == "ok"), key=lambda r: r.log)
+    named = [f"{r.log} ({', '.join(r.doubts())})" for r in fused if r.doubts()]
+    if not named:
+        return None
+    more = f"; and {len(named) - 3} more" if len(named) > 3 else ""
+    return (
+        f"{len(named)} of the {len(fused)} logs fused need a look (the summary's diverged and "
+        f"model_check columns): {'; '.join(named[:3])}{more}"
+    )
+
 
 def _described(name: str, done: FileRun, seconds: float) -> LogResult:
     """The summary row of a run written to files."""

@@ -27,6 +27,7 @@ from altfuse.batch import (
     LogResult,
     Outcome,
     PlotFormat,
+    doubted,
     run_batch,
     summary_name,
 )
@@ -658,10 +659,11 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
     per log: status (ok; refused: valid but not fusable, with the reason; skipped; failed: an
     error), the flight's and the processing's seconds, vehicle, sensors, the reader's notes,
     the share of ticks fused, divergences, and with --evaluate each method's RMSE and maximum
-    error. The method options are fuse's; with --evaluate they apply to every method evaluated
-    that takes them. Run again over logs whose outputs are there, it asks for --skip-existing
-    or --force. Exit code 0 when no log failed (refusals are not failures), 4 when some
-    failed, 1 or 2 when the batch itself cannot run.
+    error; the logs whose fused altitude left every sensor or failed its model check are named
+    in one warning at the end. The method options are fuse's; with --evaluate they apply to
+    every method evaluated that takes them. Run again over logs whose outputs are there, it asks
+    for --skip-existing or --force. Exit code 0 when no log failed (refusals are not failures),
+    4 when some failed, 1 or 2 when the batch itself cannot run.
 
     \b
     Example:
@@ -697,6 +699,9 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
         shard=shard,
     )
     counts = {s: sum(r.status == s for r in results) for s in get_args(Outcome)}
+    look = doubted(results)
+    if look:
+        logging.getLogger("altfuse").warning("%s", look)
     click.echo(
         f"{output / summary_name(shard)}: {len(results)} logs, "
         + ", ".join(f"{k} {v}" for k, v in counts.items())
