@@ -81,6 +81,9 @@ def test_segments_by_length_and_by_boundaries() -> None:
     assert list(parse_segments("30,70", t).values()) == [(0.0, 30.0), (30.0, 70.0), (70.0, 100.0)]
     with pytest.raises(ParameterError, match=r"^segments takes seconds or boundaries, got 'soon'"):
         parse_segments("soon", t)
+    for empty in (",", " , ,"):  # no boundary: not one segment over the whole log, unsaid
+        with pytest.raises(ParameterError, match=r"^segments takes seconds or boundaries, got '"):
+            parse_segments(empty, t)
     # issue 19: a boundary outside the log is said, not silently dropped
     with pytest.raises(ParameterError, match=r"^segments 150, -5 s outside the log's clock"):
         parse_segments("30,150,-5", t)
@@ -91,7 +94,8 @@ def test_a_segment_shorter_than_a_tick_is_refused(length: str) -> None:
     """Segments of 1e-9 s on a two-minute log were 1.2e11 of them: 893 GiB asked for, and an
     out-of-memory error advising a lower --rate."""
     t = np.arange(0, 1001) / 10.0  # 0..100 s at 10 Hz
-    with pytest.raises(ParameterError, match=r"^segments length must be at least the clock's tick"):
+    said = r"^segments length must be at least the clock's tick \(1 s\) and finite, got "
+    with pytest.raises(ParameterError, match=said + f"{float(length):g}$"):
         parse_segments(length, np.arange(0, 101) / 1.0)
     assert len(parse_segments("0.1", t)) == 1000
     assert len(parse_segments("0.1", 30 + t)) == 1000  # its tick 0.10000000000000142

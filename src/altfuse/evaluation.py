@@ -270,6 +270,8 @@ def parse_segments(spec: str | None, t: FloatArray) -> dict[str, tuple[float, fl
         values = [float(v) for v in spec.split(",") if v.strip()]
     except ValueError as exc:
         raise InvalidParameter("segments", f"takes seconds or boundaries, got {spec!r}") from exc
+    if not values:  # "," or " , ": no boundary, where one whole-log segment went unremarked
+        raise InvalidParameter("segments", f"takes seconds or boundaries, got {spec!r}")
     start, end = float(t[0]), float(t[-1])
     if len(values) == 1 and "," not in spec:
         tick = float(t[1] - t[0]) if t.size > 1 else 0.0
@@ -277,7 +279,8 @@ def parse_segments(spec: str | None, t: FloatArray) -> dict[str, tuple[float, fl
         if not (math.isfinite(values[0]) and values[0] > 0 and values[0] >= tick * (1 - 1e-9)):
             raise InvalidParameter(
                 "segments",
-                f"length must be at least the clock's tick ({tick:g} s), got {values[0]:g}",
+                f"length must be at least the clock's tick ({tick:g} s) and finite, "
+                f"got {values[0]:g}",
             )
         edges = [*np.arange(start, end, values[0]).tolist(), end]
     else:
