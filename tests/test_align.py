@@ -119,6 +119,12 @@ def test_a_span_shorter_than_a_tick_says_so() -> None:
     message = r"union spans 0.7 s \(81.9-82.6 s\), between two ticks of a 0.2 Hz clock; raise"
     with pytest.raises(NoUsableSensorsError, match=message):
         align([a], rate_hz=0.2)
+    # one tick is no clock either: at 1e-320 Hz, one tick at 0 s (the log's 82 s to rounding),
+    # whose fused value was NaN, an internal error where the metadata was written
+    for rate_hz in (1.0, 1e-320):
+        with pytest.raises(NoUsableSensorsError, match=r"a single tick \(a clock needs two\)"):
+            align([a], rate_hz=rate_hz)
+    assert align([a], rate_hz=2.0).t.tolist() == [82.0, 82.5]
 
 
 def climb_profile(t: np.ndarray) -> np.ndarray:

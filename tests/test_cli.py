@@ -172,6 +172,11 @@ def test_a_batch_whose_output_folder_may_not_be_made_is_one_line(
         (["--method", "multilayer", "--time-constant", "0"], "--time-constant"),
         (["--method", "multilayer", "--e-max", "-1"], "--e-max"),
         (["--method", "multilayer", "--reopen", "-1"], "--reopen"),
+        # beyond LARGEST: each an internal error (an overflow, NaN in the metadata) before
+        (["-m", "support", "--window", "1e308"], "--window must be at most 1e+09, got 1e+308"),
+        (["-m", "multilayer", "--time-constant", "1e308"], "--time-constant must be at most 1e+09"),
+        (["--accel-noise", "1e308"], "--accel-noise must be at most 1e+09, got 1e+308"),
+        (["--sigma", "gps=1e308"], "--sigma must be at most 1e+09, got 1e+308"),
     ],
 )
 def test_nonsense_parameters(tmp_path: Path, args: list[str], fragment: str) -> None:
@@ -179,6 +184,21 @@ def test_nonsense_parameters(tmp_path: Path, args: list[str], fragment: str) -> 
     result = run("fuse", SAMPLE_LOG, "-o", out, *args)
     assert_one_line_error(result, 2, fragment)
     assert not out.exists()
+
+
+def test_the_smallest_rate_and_ground_window_are_no_internal_error(tmp_path: Path) -> None:
+    """At 1e-320 Hz the clock held one tick, at 0 s, and at a 1e-320 s ground window no tick
+    was in the window: both were internal errors (NaN in the metadata; an empty window). The
+    clock is refused as the log's fault for that rate, the window holds one tick."""
+    out = tmp_path / "out.csv"
+    result = run("fuse", SAMPLE_LOG, "-o", out, "--rate", "1e-320")
+    assert_one_line_error(result, 1, "a single tick (a clock needs two) of a 9.99989e-321 Hz")
+    assert not out.exists()
+    result = run("fuse", SAMPLE_LOG, "-o", out, "--ground-window", "1e-320")
+    assert result.exit_code == 0, result.output
+    datum = json.loads(out.with_suffix(".meta.json").read_text())["datum"]
+    start, end = datum["ground_window_s"]
+    assert start == end  # one tick
 
 
 @pytest.mark.parametrize(

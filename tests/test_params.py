@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
@@ -12,7 +13,7 @@ from altfuse.fuse.complementary import MultilayerParams
 from altfuse.fuse.delay import DelayParams
 from altfuse.fuse.smoother import SmootherParams
 from altfuse.fuse.support import SupportParams
-from altfuse.params import InvalidParameter, fields, flag_of
+from altfuse.params import LARGEST, InvalidParameter, fields, flag_of
 from altfuse.pipeline import FuseOptions
 
 
@@ -34,6 +35,23 @@ def test_fuse_options_check_themselves_when_built(kwargs: dict[str, object], mes
     with pytest.raises(InvalidParameter) as caught:
         FuseOptions(**kwargs)  # type: ignore[arg-type]
     assert str(caught.value) == message
+
+
+@pytest.mark.parametrize("name", sorted(METHODS))
+def test_no_number_is_taken_beyond_the_largest(name: str) -> None:
+    """Every number a method or the options take is refused beyond LARGEST (some overflowed
+    first: an internal error), with each field's own maximum where lower."""
+    assert LARGEST == 1e9
+    types = [METHODS[name].params, FuseOptions]
+    for cls in types:
+        for f in fields(cls):
+            if f.name in ("method", "params", "span", "referral", "form", "gate_form"):
+                continue
+            value = {"gps": 1e10} if f.name in ("sigma_m", "offset_noise_m2_s") else 1e10
+            limit = min(f.metadata["maximum"], LARGEST)
+            said = re.escape(f"{f.name} must be at most {limit:g}, got ")
+            with pytest.raises(InvalidParameter, match=f"^{said}"):
+                cls(**{f.name: value})
 
 
 def test_fuse_options_know_the_methods_and_their_parameter_types() -> None:

@@ -168,12 +168,14 @@ def make_grid(series: Sequence[Series], rate_hz: float, span: Span) -> FloatArra
             f"{rate_hz:g} Hz, more than {cap:,} ({TICKS_PER_SAMPLE:,} per sample); lower --rate "
             "or check the log's timestamps"
         )
-    if last < first:
+    if last <= first:  # one tick is no clock: at 1e-320 Hz, one at 0 s, before the log
         raise NoUsableSensorsError(
             "the altitude sources do not overlap in time; try --span union"
             if start > end
             else f"the altitude sources' {span} spans {end - start:.3g} s ({start:.1f}-"
-            f"{end:.1f} s), between two ticks of a {rate_hz:g} Hz clock; raise --rate"
+            f"{end:.1f} s), "
+            + ("between two ticks" if last < first else "a single tick (a clock needs two)")
+            + f" of a {rate_hz:g} Hz clock; raise --rate"
         )
     return np.arange(first, last + 1, dtype=np.float64) / rate_hz
 

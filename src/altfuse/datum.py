@@ -398,11 +398,14 @@ def choose_reference(aligned: Aligned) -> int:
 def _first_seconds(
     mask: npt.NDArray[np.bool_], t: FloatArray, seconds: float
 ) -> npt.NDArray[np.bool_]:
-    """The first ``seconds`` of ticks where ``mask`` holds."""
+    """The first ``seconds`` of ticks where ``mask`` holds, the first of them at least (a
+    ``--ground-window`` of 1e-320 s added to a tick's time is that time: no tick was in it,
+    and referring the sensors failed on an empty window)."""
     out: npt.NDArray[np.bool_] = np.zeros(mask.shape, dtype=bool)
     idx = np.flatnonzero(mask)
     if idx.size:
         out[idx[t[idx] < t[idx[0]] + seconds]] = True
+        out[idx[0]] = True
     return out
 
 

@@ -40,6 +40,16 @@ _CHECKS: dict[Check, tuple[Callable[[float], bool], str]] = {
 }
 
 
+#: The largest number any parameter takes, in its unit, where its own ``maximum`` is not
+#: lower. None means anything beyond it (1e9 s is 31 years, 1e9 m beyond the Moon), and some
+#: overflowed long before a float does, an internal error where a usage error belongs: a
+#: support window of 1e100 s was more ticks than an integer holds, a multilayer time constant
+#: of 1e308 s squared to infinity, an acceleration noise of 1e308 m^2/s^3 or a sensor's noise
+#: of 1e308 m left NaN and infinity in the metadata. Every method ran on each of its fields at
+#: 1e15, on three logs (an ArduPilot sample, a PX4 log, a log without IMU).
+LARGEST = 1e9
+
+
 class InvalidParameter(ParameterError):
     """A parameter value that means nothing, named as the library names it (``beta``)."""
 
@@ -55,16 +65,17 @@ def param(  # noqa: PLR0913 (keyword-only: a field's metadata, by name)
     help: str,
     unit: str = "",
     check: Check = "any",
-    maximum: float = math.inf,
+    maximum: float = LARGEST,
     default_text: str | None = None,
     flag: str | None = None,
     aliases: tuple[str, ...] = (),
 ) -> Any:
     """A dataclass field with its metadata: ``help``, ``unit`` (its name ends in the unit's
-    suffix), ``check`` and ``maximum`` on numbers, ``default_text`` for a default chosen at
-    run time (a ``None`` default: "from the data"), and the command line's ``flag`` where the
-    name does not make one that says what it is, with older ``aliases`` still taken (not shown).
-    A mapping default is copied per instance."""
+    suffix), ``check`` and ``maximum`` on numbers (:data:`LARGEST` unless lower),
+    ``default_text`` for a default chosen at run time (a ``None`` default: "from the data"),
+    and the command line's ``flag`` where the name does not make one that says what it is,
+    with older ``aliases`` still taken (not shown). A mapping default is copied per
+    instance."""
     metadata = {
         "help": help,
         "unit": unit,
