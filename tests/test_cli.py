@@ -261,6 +261,33 @@ def test_a_table_named_as_another_format_is_refused(
         assert run("fuse", SAMPLE_LOG, "-o", tmp_path / kept).exit_code == 0
 
 
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (["fuse", "-o", "{d}/a.csv", "--meta", "{d}/a.bin"], "a.bin: this is written as JSON"),
+        (["fuse", "-o", "{d}/a.csv", "--meta", "{d}/m.csv.gz"], "m.csv.gz: this is written as"),
+        (["evaluate", "-o", "{d}/report.csv"], "report.csv: this is written as JSON, not as .csv"),
+        (["evaluate", "-o", "{d}/r.parquet"], "r.parquet: this is written as JSON, not as .parq"),
+    ],
+)
+def test_a_json_output_named_as_another_format_is_refused(
+    tmp_path: Path, args: list[str], named: str
+) -> None:
+    """``evaluate -o report.csv`` wrote the JSON report into a .csv file, and ``--meta a.bin``
+    a sidecar that reads later as a damaged log, exit 0; tables were refused so, JSON not. Now
+    exit 2, one line, nothing written; a name of no format's (``a.meta``) or JSON's in any case
+    is taken."""
+    command, *rest = args
+    result = run(command, SAMPLE_LOG, *(a.format(d=tmp_path) for a in rest))
+    assert_one_line_error(result, 2, named)
+    assert not list(tmp_path.iterdir())
+    for kept in ("a.meta", "b.JSON", "c.json.gz"):
+        table = tmp_path / f"{kept}.csv"
+        result = run("fuse", SAMPLE_LOG, "-o", table, "--meta", tmp_path / kept)
+        assert result.exit_code == 0, result.output
+        assert (tmp_path / kept).exists()
+
+
 def test_output_onto_the_input_is_refused(tmp_path: Path) -> None:
     log = tmp_path / "log.bin"
     log.write_bytes(SAMPLE_LOG.read_bytes())

@@ -219,6 +219,19 @@ def test_a_method_named_twice_is_evaluated_once(tmp_path: Path) -> None:
     assert result.stdout.count("\nmean ") == 1
 
 
+def test_a_list_of_no_method_is_refused() -> None:
+    """``--methods ,`` (and ``evaluate(log, [])``) ran every method without a word."""
+    for given in (",", "", " , "):
+        result = CliRunner().invoke(cli, ["evaluate", str(PAPER_A), "--methods", given])
+        assert result.exit_code == 2
+        assert result.stderr == (
+            "altfuse: error: --methods names no method; choose from mean, support, delay1, "
+            "delay2, multilayer, smoother\n"
+        )
+    with pytest.raises(ParameterError, match=r"^methods names no method; choose from mean"):
+        evaluate(Path("not read.bin"), [])  # refused before the log is read
+
+
 def test_one_method_may_be_named_by_its_name_alone() -> None:
     """``evaluate(log, "support")``, not its letters as methods ("unknown method 's'")."""
     result = evaluate(PAPER_A, "support")

@@ -31,7 +31,7 @@ from altfuse.batch import (
     run_batch,
     summary_name,
 )
-from altfuse.evaluation import TRUTHS, Evaluation, TruthChoice
+from altfuse.evaluation import TRUTHS, Evaluation, TruthChoice, method_names
 from altfuse.evaluation import evaluate as evaluate_log
 from altfuse.files import is_stream
 from altfuse.fuse import DEFAULT_METHOD, METHODS, params_by_method
@@ -47,6 +47,7 @@ from altfuse.write import (
     STDOUT,
     TableFormat,
     atomic_outputs,
+    check_json_path,
     check_paths,
     check_table_path,
     refuse_existing,
@@ -504,9 +505,11 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
     check_paths([json_path, csv_path, plot_path], [log])
     if csv_path is not None:
         check_table_path(csv_path, parquet=False)
+    if json_path is not None:
+        check_json_path(json_path)
     refuse_existing(force, json_path, csv_path, plot_path)
-    named = (m.strip() for m in (methods or ",".join(METHODS)).split(","))
-    chosen = list(dict.fromkeys(m for m in named if m))  # each once, in the order given
+    named = None if methods is None else [m.strip() for m in methods.split(",") if m.strip()]
+    chosen = method_names(named)
     params = params_by_method(_method_values(options), chosen)
     with _progress_line():
         result = evaluate_log(log, chosen, FuseOptions(params=params, **options), truth, segments)

@@ -345,7 +345,25 @@ def evaluate(
     A method that cannot run on the log (``multilayer`` without IMU) is listed in ``failed``.
     """
     options = options or FuseOptions()
-    return evaluate_prepared(prepare_log(path, options), methods, options, truth, segments)
+    names = method_names(methods)  # before the log is read
+    return evaluate_prepared(prepare_log(path, options), names, options, truth, segments)
+
+
+def method_names(methods: str | Sequence[str] | None) -> list[str]:
+    """The methods ``methods`` names (a string: one; None: every method), each once in the
+    order given; an unknown name is refused, as is a list of none (``--methods ,`` ran every
+    method, unsaid)."""
+    if methods is None:
+        names = list(METHODS)
+    elif isinstance(methods, str):
+        names = [methods]
+    else:
+        names = list(dict.fromkeys(methods))
+    if not names:
+        raise InvalidParameter("methods", f"names no method; choose from {', '.join(METHODS)}")
+    for name in names:
+        method(name)
+    return names
 
 
 def evaluate_prepared(
@@ -362,9 +380,7 @@ def evaluate_prepared(
     are those the evaluation would run it with.
     """
     options = options or FuseOptions()
-    methods = [methods] if isinstance(methods, str) else list(methods or METHODS)
-    for name in methods:
-        method(name)
+    methods = method_names(methods)
     reference = choose_truth(prepared.log, prepared.referred, truth)
     t = prepared.referred.t
     spans = parse_segments(segments, t)

@@ -30,6 +30,7 @@ from altfuse.write import (
     STDOUT,
     OutputError,
     Writer,
+    check_json_path,
     check_paths,
     check_table_path,
     default_meta_path,
@@ -74,7 +75,8 @@ class Outputs:
 
     def refuse(self, log_path: Path, force: bool = False, remedy: str = "--force") -> None:
         """Refuse outputs that would overwrite the input log or each other, tables named as
-        another format (:func:`altfuse.write.check_table_path`), existing files unless
+        another format (:func:`altfuse.write.check_table_path`), a sidecar named as one
+        (:func:`altfuse.write.check_json_path`), existing files unless
         ``force`` (:func:`altfuse.write.check_paths`; ``remedy``: what sets it, for the
         message), and a table for a standard output that is closed (``-o - >&-``: Python's
         ``sys.stdout`` is None)."""
@@ -84,6 +86,8 @@ class Outputs:
         for table in (self.csv, self.weights):
             if table is not None:
                 check_table_path(table)
+        if self.meta is not None:
+            check_json_path(self.meta)
         refuse_existing(force, *self.paths(), remedy=remedy)
 
 

@@ -68,14 +68,28 @@ def check_table_path(path: Path, parquet: bool = True) -> None:
     """Refuse a table's name (a fused table's, a weights', a report's) whose suffix, less a
     compression's, names another format (:data:`OTHER_FORMATS`; ``.parquet`` too where the
     table is written as CSV alone, ``parquet`` False): it was written as CSV."""
-    named = path.with_suffix("") if compression_named(path) is not None else path
-    suffix = named.suffix.lower()
-    if suffix in OTHER_FORMATS or (suffix == ".parquet" and not parquet):
+    suffix = _format_suffix(path)
+    if suffix.lower() in OTHER_FORMATS or (suffix.lower() == ".parquet" and not parquet):
         formats = "as CSV, or as Parquet for a .parquet name" if parquet else "as CSV"
         raise ParameterError(
-            f"{path}: this table is written {formats}, not as {named.suffix}: "
+            f"{path}: this table is written {formats}, not as {suffix}: "
             f"name it .csv{' or .parquet' if parquet else ''}"
         )
+
+
+def check_json_path(path: Path) -> None:
+    """Refuse a JSON output's name (a sidecar's, a report's) whose suffix, less a
+    compression's, names another format: a table's (``report.csv`` was JSON to whoever read it
+    as the CSV it asked for) or one of :data:`OTHER_FORMATS` (a sidecar named ``.bin`` reads
+    later as a damaged log)."""
+    suffix = _format_suffix(path)
+    if suffix.lower() in {*OTHER_FORMATS, ".csv", ".tsv", ".parquet"} - {".json"}:
+        raise ParameterError(f"{path}: this is written as JSON, not as {suffix}: name it .json")
+
+
+def _format_suffix(path: Path) -> str:
+    """``path``'s suffix less a compression's (``.csv`` of ``out.csv.gz``)."""
+    return (path.with_suffix("") if compression_named(path) is not None else path).suffix
 
 
 _UNITS = {"velocity": "m/s", "accel_bias": "m/s^2", "accel_up": "m/s^2", "correction": "m"}
