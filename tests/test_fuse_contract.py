@@ -125,6 +125,12 @@ def test_heights_of_one_sensor_may_be_one_dimensional() -> None:
         (np.zeros((10, 2)), {"kinds": ["gps"]}, r"1 kinds for 2 sensors \(the columns of z\)"),
         (np.zeros((10, 2)), {"kinds": ["gps", "lidar"]}, "unknown sensor kind 'lidar'; kinds"),
         (np.zeros((10, 2)), {"accel_up": np.zeros(9)}, r"accel has shape \(9,\) for .* 10 ticks"),
+        # each of these came out of a method: a warning, an OverflowError, numpy's "array of
+        # sample points is empty" (the smoother)
+        (np.zeros((0, 2)), {}, r"shape \(0, 2\): heights are \(ticks, sensors\), one tick or"),
+        (np.array([[1.0, np.inf]]), {}, r"holds inf at tick 0, column 1: heights are finite"),
+        (np.array([[1.0], [-np.inf]]), {}, "holds -inf at tick 1, column 0"),
+        (np.array([[1.0, 1e201]]), {}, r"holds 1e\+201 at tick 0, column 1: .* within 1e\+06 m"),
     ],
 )
 def test_heights_the_methods_cannot_take_are_refused_in_words(

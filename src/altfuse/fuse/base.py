@@ -27,6 +27,10 @@ DIVERGED: Final[Status] = "diverged"  # the value left every valid sensor (altfu
 
 #: What a method may ask the pipeline to compute from the log beyond what every method gets.
 LogInput = Literal["accel"]
+#: The largest height [m] :meth:`FusionInput.from_heights` takes, above or below its zero: 80
+#: times the plausible envelope's top (``altfuse.screen``: 12,000 m AMSL). Heights of 1e201 m
+#: overflowed every method's squares, a warning or an OverflowError from inside it.
+MAX_HEIGHT_M = 1e6
 
 
 #: A step between sensors: its time [s], the sensors that may have jumped, the jump [m], how
@@ -181,12 +185,22 @@ class FusionInput:
         valid ticks. ``kinds`` default to gps, baro, rangefinder, gps, ... in turn; ``names`` to
         the kinds, numbered from the second of a kind on (``gps2``), as the readers name them;
         ``accel_up`` [m/s², up, at rest 0] is the vertical acceleration at the ticks.
-        ValueError for a shape, a tick or a kind that is none of these."""
+        ValueError for a shape, a tick or a kind that is none of these, and for a height that
+        is infinite or beyond ``MAX_HEIGHT_M``."""
         z = np.asarray(z, dtype=np.float64)
         if z.ndim == 1:
             z = z[:, np.newaxis]
-        if z.ndim != 2:
-            raise ValueError(f"z has shape {z.shape}: heights are (ticks, sensors)")
+        if z.ndim != 2 or z.shape[0] == 0:
+            raise ValueError(
+                f"z has shape {z.shape}: heights are (ticks, sensors), one tick or more"
+            )
+        beyond = np.argwhere(~(np.abs(z) <= MAX_HEIGHT_M) & ~np.isnan(z))
+        if beyond.size:
+            tick, column = beyond[0]
+            raise ValueError(
+                f"z holds {z[tick, column]:g} at tick {tick}, column {column}: heights are finite "
+                f"and within {MAX_HEIGHT_M:g} m, NaN where a sensor has none"
+            )
         if not (np.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s must be a positive number of seconds, got {dt_s}")
         t = np.asarray(np.arange(z.shape[0]) * dt_s, dtype=np.float64)
