@@ -7,6 +7,7 @@ import filecmp
 import json
 import multiprocessing
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -169,8 +170,12 @@ def test_finding_logs(tmp_path: Path) -> None:
     assert [str(rel) for _, rel in find_logs([tmp_path], "*.tlog")] == ["c.tlog"]
     # a log named twice is run once
     assert len(find_logs([tmp_path, tmp_path / "b.BIN"])) == 4
-    with pytest.raises(ParameterError, match="would write the same outputs"):
+    # two logs of one name: the folder above both keeps them apart ("give the folders
+    # separately" said nothing a user could do: they had been)
+    above = re.escape(f"give the folder above both ({tmp_path}: its tree keeps them apart)")
+    with pytest.raises(ParameterError, match=f"would write the same outputs .*; {above}, or run"):
         find_logs([tmp_path / "a.bin", tmp_path / "x" / "a.bin"])
+    assert len(find_logs([tmp_path], "a.bin")) == 2  # as the message says
     with pytest.raises(LogReadError, match="no such file or folder"):
         find_logs([tmp_path / "nope"])
     with pytest.raises(LogReadError, match=r"^-: a batch takes files and folders, not standard"):

@@ -286,9 +286,11 @@ def _matching(listed: Sequence[Listed], pattern: str | Sequence[str]) -> list[tu
             continue
         seen.add(real)
         if relative in found:
+            above = os.path.commonpath([found[relative].absolute(), log.absolute()])
             raise ParameterError(
                 f"{found[relative]} and {log} would write the same outputs ({relative}); "
-                "give the folders separately"
+                f"give the folder above both ({above}: its tree keeps them apart), or run "
+                "separate batches into separate folders"
             )
         found[relative] = log
     return [(log, relative) for relative, log in sorted(found.items())]
