@@ -147,7 +147,7 @@ def test_garbage_timestamps_cannot_allocate_a_huge_clock() -> None:
 
 @pytest.mark.parametrize("command", ["fuse", "evaluate", "simulate"])
 def test_existing_outputs_are_not_overwritten_without_force(tmp_path: Path, command: str) -> None:
-    out = tmp_path / "out.csv"
+    out = tmp_path / ("out.bin" if command == "simulate" else "out.csv")
     out.write_text("precious")
     args = {
         "fuse": ["fuse", str(SAMPLE_LOG), "-o", str(out)],

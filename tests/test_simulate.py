@@ -11,6 +11,7 @@ from click.testing import CliRunner
 from pymavlink import mavutil
 
 from altfuse.cli import cli
+from altfuse.errors import ParameterError
 from altfuse.evaluation import evaluate
 from altfuse.inertial import G, vertical_acceleration
 from altfuse.io import read_log
@@ -384,3 +385,21 @@ def test_nonsense_simulate_arguments(tmp_path: Path, args: list[str], fragment: 
     assert result.exit_code == 2
     assert fragment in result.stderr
     assert not out.exists()
+
+
+def test_a_simulated_log_named_as_another_format_is_refused(tmp_path: Path) -> None:
+    """``simulate -o hover.csv`` (or ``.ulg``, ``.log``: a text log's) wrote a binary DataFlash
+    log that a batch's patterns pass over; refused, nothing written. Any case of ``.bin``, a
+    compressed one and a name of no format are written."""
+    for name in ("hover.csv", "hover.ulg", "hover.log", "hover.json.gz"):
+        result = CliRunner().invoke(cli, ["simulate", "hover", "-o", str(tmp_path / name)])
+        assert result.exit_code == 2
+        suffix = Path(name.removesuffix(".gz")).suffix
+        said = f"{tmp_path / name}: this is written as a DataFlash log, not as {suffix}: name it"
+        assert result.stderr == f"altfuse: error: {said} .bin\n"
+    assert not list(tmp_path.iterdir())
+    flight = simulate_flight("hover", 0, duration_s=120.0)
+    for name in ("a.BIN", "b.bin.xz", "c.dat"):
+        assert write_simulated_log(flight, tmp_path / name) > 0
+    with pytest.raises(ParameterError, match=r"this is written as a DataFlash log, not as \.ulg"):
+        write_simulated_log(flight, tmp_path / "d.ulg")

@@ -65,7 +65,7 @@ from altfuse.inertial import G
 from altfuse.io.dataflash import EV_EKF_ALT_RESET
 from altfuse.model import FloatArray, brief_repr
 from altfuse.params import InvalidParameter
-from altfuse.write import atomic_outputs
+from altfuse.write import atomic_outputs, check_log_path
 
 HOME_AMSL_M = 112.0
 HOME_LAT, HOME_LNG = -35.363261, 149.165230  # ArduPilot's simulator home
@@ -609,8 +609,11 @@ _TYPES = {
 
 
 def write_simulated_log(flight: SimulatedFlight, path: str | Path) -> int:
-    """Write ``flight`` as a DataFlash log at ``path`` (atomically); return the record count."""
+    """Write ``flight`` as a DataFlash log at ``path`` (atomically); return the record count.
+    A name of another format (``hover.csv``, ``hover.ulg``) is refused
+    (:func:`altfuse.write.check_log_path`)."""
     path = Path(path)
+    check_log_path(path)
     rows: list[tuple[float, str, tuple[object, ...]]] = [
         (BOOT_S + ti, name, values) for name, recs in flight.records.items() for ti, values in recs
     ]

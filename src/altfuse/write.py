@@ -82,9 +82,22 @@ def check_json_path(path: Path) -> None:
     compression's, names another format: a table's (``report.csv`` was JSON to whoever read it
     as the CSV it asked for) or one of :data:`OTHER_FORMATS` (a sidecar named ``.bin`` reads
     later as a damaged log)."""
-    suffix = _format_suffix(path)
-    if suffix.lower() in {*OTHER_FORMATS, ".csv", ".tsv", ".parquet"} - {".json"}:
-        raise ParameterError(f"{path}: this is written as JSON, not as {suffix}: name it .json")
+    _check_written_as(path, "JSON", ".json")
+
+
+def check_log_path(path: Path) -> None:
+    """Refuse a written DataFlash log's name (a simulated flight's) whose suffix, less a
+    compression's, names another format: ``hover.csv`` or ``hover.ulg`` held a binary
+    DataFlash log, which a batch's patterns pass over."""
+    _check_written_as(path, "a DataFlash log", ".bin")
+
+
+def _check_written_as(path: Path, what: str, suffix: str) -> None:
+    """Refuse ``path`` for a file written as ``what`` where its suffix (less a compression's)
+    is a table's or one of :data:`OTHER_FORMATS` other than ``suffix``, the right one."""
+    named = _format_suffix(path)
+    if named.lower() in {*OTHER_FORMATS, ".csv", ".tsv", ".parquet"} - {suffix}:
+        raise ParameterError(f"{path}: this is written as {what}, not as {named}: name it {suffix}")
 
 
 def _format_suffix(path: Path) -> str:
