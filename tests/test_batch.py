@@ -118,6 +118,28 @@ def test_batch_over_the_shared_logs_refuses_the_unfusable_and_exits_0(tmp_path: 
     assert "11 logs, ok 8, refused 3, skipped 0, failed 0" in result.stdout
 
 
+def test_a_sensor_value_applies_to_the_logs_that_have_the_sensor(tmp_path: Path) -> None:
+    """``--sigma rangefinder=0.05`` over a fleet: the logs with a rangefinder use it, those
+    without fuse as they would (each failed before: 5 of the 8 fusable shared ArduPilot logs)."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for name in ("beastayyg_log_0038_mechanical_failure.bin", "spark404_log.bin"):
+        (logs / name).symlink_to(shared_log(f"ardupilot/{name}"))
+    out = tmp_path / "out"
+    args = ["batch", str(logs), "-o", str(out), "-j", "1", "--sigma", "rangefinder=0.05"]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    summary = pd.read_csv(out / "summary.csv").set_index("log")
+    assert summary.status.to_dict() == {
+        "beastayyg_log_0038_mechanical_failure.bin": "ok",
+        "spark404_log.bin": "ok",
+    }
+    used = json.loads((out / "beastayyg_log_0038_mechanical_failure.meta.json").read_text())
+    assert used["parameters"]["sigma_rangefinder_m"] == 0.05
+    alone = CliRunner().invoke(cli, ["fuse", str(logs / "spark404_log.bin"), "-o", "-"])
+    assert (out / "spark404_log.csv").read_text() == alone.stdout
+
+
 def test_the_logs_that_need_a_look_are_named_in_one_line() -> None:
     """The end of a batch names the logs fused now that ``fuse`` would have warned of: those
     the guard flagged and those whose model check failed, by name, three at most; not a log

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import math
 import re
 from dataclasses import replace
@@ -124,11 +125,12 @@ def test_sigma_override_and_nonsense_options(tmp_path: Path) -> None:
     assert params["sigma_gps_m"] == 2.5
     assert params["q_offset_baro_m2_s"] == pytest.approx(0.003)
     for args, fragment in (
-        (["--sigma", "lidar=1"], "--sigma names no sensor"),
+        (["--sigma", "lidar=1"], "--sigma names no sensor altfuse reads: 'lidar'; sensors are"),
+        (["--sigma", "gps1=1"], "--sigma names no sensor altfuse reads: 'gps1'"),
         (["--sigma", "gps"], "--sigma"),
         (["--gate", "0"], "--gate"),
         (["--offset-noise", "baro=-1"], "--offset-noise"),
-        (["--offset-noise", "sonar=1"], "--offset-noise names no sensor"),
+        (["--offset-noise", "sonar=1"], "--offset-noise names no sensor altfuse reads: 'sonar'"),
         # the last silently won
         (["--sigma", "gps=0.5", "--sigma", "gps=0.8"], "--sigma gives gps twice (0.5 and 0.8)"),
     ):
@@ -139,10 +141,23 @@ def test_sigma_override_and_nonsense_options(tmp_path: Path) -> None:
         assert fragment in bad.stderr
     with pytest.raises(InvalidParameter, match=r"^accel_noise_m2_s3 must be a positive number"):
         SmootherParams(accel_noise_m2_s3=-1.0)
-    with pytest.raises(InvalidParameter, match=r"^sigma_m names no sensor of this log: lidar"):
-        fuse_smoother(
-            FusionInput.from_heights(np.ones((2, 1))), SmootherParams(sigma_m={"lidar": 1.0})
-        )
+    with pytest.raises(InvalidParameter, match=r"^sigma_m names no sensor altfuse reads: 'lid"):
+        SmootherParams(sigma_m={"lidar": 1.0})  # before any log is read
+
+
+def test_a_sensor_the_log_lacks_is_not_used_and_said(caplog: pytest.LogCaptureFixture) -> None:
+    """A per-sensor value for a sensor this log does not have was an error, which failed
+    every log of a batch without it (``--sigma rangefinder=0.05`` over the shared ArduPilot
+    logs: 5 of 8 failed). It is said and not used; the result is the one without it."""
+    inputs = FusionInput.from_heights(np.column_stack([np.linspace(0, 5, 200)] * 2), 0.1)
+    plain = fuse_smoother(inputs, SmootherParams())
+    with caplog.at_level(logging.WARNING, logger="altfuse"):
+        given = fuse_smoother(inputs, SmootherParams(sigma_m={"rangefinder": 0.05}))
+    np.testing.assert_array_equal(given.fused, plain.fused)
+    assert caplog.messages == [
+        "sigma_m (--sigma) names rangefinder, which this log does not have (its sensors: gps, "
+        "baro): not used"
+    ]
 
 
 def test_terrain_roughness_is_per_metre_flown() -> None:

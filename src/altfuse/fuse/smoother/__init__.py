@@ -275,6 +275,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
@@ -338,8 +339,8 @@ from altfuse.fuse.smoother.noise import (
 from altfuse.fuse.smoother.passes import FOR_EM, FOR_RESULT, HEIGHT_ONLY, run
 from altfuse.fuse.smoother.velocity import VELOCITY_NAME, checked_velocity, lag_regressor
 from altfuse.memory import release_free_memory
-from altfuse.model import FloatArray, Samples
-from altfuse.params import InvalidParameter, Params, param
+from altfuse.model import SENSOR_KINDS, FloatArray, Samples
+from altfuse.params import InvalidParameter, Params, fields, flag_of, param
 from altfuse.steps import jump_instant
 
 progress = logging.getLogger("altfuse.progress")  # as altfuse.pipeline.progress
@@ -419,6 +420,25 @@ class SmootherParams(Params):
         f"it stable), baro {Q_OFFSET['baro']:g}; rangefinder from the terrain and the speed",
     )
 
+    def __post_init__(self) -> None:
+        """A per-sensor value names a sensor as the readers name them (:data:`SENSOR_NAME`),
+        whether or not a log has it: ``lidar`` never fuses, ``rangefinder`` where a log has one
+        (a batch's logs differ)."""
+        super().__post_init__()
+        for name in ("sigma_m", "offset_noise_m2_s"):
+            if bad := sorted(k for k in getattr(self, name) if not SENSOR_NAME.match(k)):
+                raise InvalidParameter(
+                    name,
+                    f"names no sensor altfuse reads: {', '.join(map(repr, bad))}; sensors are "
+                    f"named {', '.join(SENSOR_KINDS)}, from the second of a kind on gps2, ...",
+                )
+
+
+#: A sensor's name as the readers make it: its kind, numbered from the second of that kind on
+#: (``gps``, ``gps2``, ``rangefinder2``): what a per-sensor value of :class:`SmootherParams`
+#: may name.
+SENSOR_NAME = re.compile(rf"^(?:{'|'.join(SENSOR_KINDS)})(?:[2-9]|[1-9][0-9]+)?$")
+
 
 def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     """Kalman filter + fixed-interval smoother over the whole flight (see the module doc).
@@ -431,8 +451,8 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     coefficient) and ``on_ground_s`` (there ``h = 0`` and ``v = 0``) when the log has them.
     """
     names, kinds, samples = inputs.names, inputs.kinds, inputs.samples
-    _known_names(params.sigma_m, names, "sigma_m")
-    _known_names(params.offset_noise_m2_s, names, "offset_noise_m2_s")
+    _say_unused(params.sigma_m, names, "sigma_m")
+    _say_unused(params.offset_noise_m2_s, names, "offset_noise_m2_s")
     m = len(samples)
     accel = None if inputs.accel is None else inputs.accel.samples
     use_imu = accel is not None and accel.t.size >= 2
@@ -839,8 +859,13 @@ def _fitted(
     }
 
 
-def _known_names(values: Mapping[str, float], names: Sequence[str], field: str) -> None:
-    """Per-sensor overrides must name sensors of this log."""
-    unknown = sorted(set(values) - set(names))
-    if unknown:
-        raise InvalidParameter(field, f"names no sensor of this log: {', '.join(unknown)}")
+def _say_unused(values: Mapping[str, float], names: Sequence[str], field: str) -> None:
+    """Warn of the per-sensor values (``field``'s) for sensors this log does not have
+    (``names``: its sensors'): not used. They were an error, which failed every log of a batch
+    without the sensor (``--sigma rangefinder=0.05`` over a fleet's logs: 5 of 8 failed)."""
+    if unused := sorted(set(values) - set(names)):
+        flag = next(flag_of(f) for f in fields(SmootherParams) if f.name == field)
+        logging.getLogger("altfuse").warning(
+            "%s (%s) names %s, which this log does not have (its sensors: %s): not used",
+            field, flag, ", ".join(unused), ", ".join(names),
+        )  # fmt: skip
