@@ -65,6 +65,7 @@ from altfuse.simulate import simulate_flight, write_simulated_log
 from altfuse.steps import find_steps
 from conftest import ROOT, shared_log
 from repeated import repeated_log
+from variants import stepped
 
 FAULTS = ROOT / "sample_logs" / "mission_faults.bin"
 
@@ -179,6 +180,34 @@ def test_terrain_roughness_is_per_metre_flown() -> None:
     flat = np.where(fast, noise, np.nan)
     assert terrain_noise(flat, flown, 10, white) < 0.002  # without it: unknown, 0.05 m^2/m
     assert terrain_noise(np.where(fast, hills + noise, np.nan), flown, 10, white) > 0.05
+
+
+def test_a_step_of_the_other_sensor_is_no_ground() -> None:
+    """The other sensor 2 m higher from half-way (a GPS's step, found between sensors): the
+    change across it is no ground's. Counted as one, it made a flat field's ground 150 times
+    as rough on a real log (beastayyg_log_0039), the rangefinder let loose and the whole
+    flight's height moved 0.39 m RMS (``benchmarks/step_robustness.py``; 0.04 since)."""
+    rng = np.random.default_rng(5)
+    flown = np.cumsum(np.full(2000, 5.0)) * 0.1  # 5 m/s throughout
+    d = rng.normal(0, 0.05, flown.size) + np.where(np.arange(flown.size) >= 1000, 2.0, 0.0)
+    white = 2 * 0.05**2
+    flat = terrain_noise(d - np.where(np.arange(flown.size) >= 1000, 2.0, 0.0), flown, 10, white)
+    assert flat < 1e-3
+    assert terrain_noise(d, flown, 10, white) > 50 * max(flat, 1e-5)  # the step as ground
+    assert terrain_noise(d, flown, 10, white, [(999, 1001)]) == pytest.approx(flat, abs=2e-4)
+
+
+def test_a_gps_step_on_a_real_log_leaves_its_height_where_it_was() -> None:
+    """beastayyg_log_0039, its GPS 2 m higher from half-way: the step is found and given to
+    the GPS, and the height should not move. It moved 0.387 m RMS (0.76 at most) while the
+    step counted as rough ground under the rangefinder; 0.043 m since."""
+    flight = read_log(shared_log("ardupilot/beastayyg_log_0039_mechanical_failure.bin"))
+    one = tuple(stepped(s, 2.0) if s.name == "gps" else s for s in flight.sensors)
+    plain = run_method(prepare(flight, FuseOptions()), FuseOptions()).result
+    moved = run_method(prepare(replace(flight, sensors=one), FuseOptions()), FuseOptions()).result
+    assert moved.params["steps"] == "128.15 s: +1.91 m, gps"
+    assert moved.fused.shape == plain.fused.shape
+    assert np.sqrt(np.nanmean((moved.fused - plain.fused) ** 2)) < 0.1
 
 
 def _rmse_by_method(name: str) -> dict[str, float]:
