@@ -177,7 +177,7 @@ def doubted(results: Sequence[LogResult]) -> str | None:
     the first three with why, for the end of a batch; None where there are none. A log skipped
     now was named by the run that fused it."""
     fused = sorted((r for r in results if r.status == "ok"), key=lambda r: r.log)
-    named = [f"{r.log} ({', '.join(r.doubts())})" for r in fused if r.doubts()]
+    named = [f"{r.log} ({', '.join(why)})" for r in fused if (why := r.doubts())]
     if not named:
         return None
     more = f"; and {len(named) - 3} more" if len(named) > 3 else ""

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import re
 import reprlib
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 from typing import Any, Literal, NamedTuple, get_args
@@ -32,6 +33,16 @@ def sensor_kind(kind: SeriesKind) -> SensorKind:
         if kind == k:
             return k
     raise ValueError(f"{kind!r} is not an altitude source's kind")
+
+
+def sensor_name(kind: str, instance: int) -> str:
+    """The name every reader gives a sensor: its kind, numbered from the second of that kind
+    on (instance 0: ``gps``, 1: ``gps2``)."""
+    return kind if instance == 0 else f"{kind}{instance + 1}"
+
+
+#: A name :func:`sensor_name` makes: what a per-sensor value (``--sigma gps2=0.5``) may name.
+SENSOR_NAME = re.compile(rf"^(?:{'|'.join(SENSOR_KINDS)})(?:[2-9]|[1-9][0-9]+)?$")
 
 
 class _Brief(reprlib.Repr):

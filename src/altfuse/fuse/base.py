@@ -13,7 +13,15 @@ import numpy.typing as npt
 
 from altfuse.datum import Track, Wind
 from altfuse.inertial import VerticalAcceleration
-from altfuse.model import SENSOR_KINDS, FloatArray, Samples, SensorKind, Vibration, brief_repr
+from altfuse.model import (
+    SENSOR_KINDS,
+    FloatArray,
+    Samples,
+    SensorKind,
+    Vibration,
+    brief_repr,
+    sensor_name,
+)
 from altfuse.params import Params
 
 #: Per-tick status of the fused value.
@@ -213,7 +221,7 @@ class FusionInput:
             raise ValueError(f"unknown sensor kind {unknown[0]!r}; kinds are {known}")
         if names is None:
             seen = [kinds[:i].count(k) for i, k in enumerate(kinds)]
-            names = [k if c == 0 else f"{k}{c + 1}" for k, c in zip(kinds, seen, strict=True)]
+            names = [sensor_name(k, c) for k, c in zip(kinds, seen, strict=True)]
         names = tuple(names)
         ok = np.isfinite(z)
         samples = tuple(Samples(t[ok[:, i]], z[ok[:, i], i]) for i in range(z.shape[1]))

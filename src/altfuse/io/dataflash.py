@@ -60,6 +60,7 @@ from altfuse.model import (
     Series,
     SeriesKind,
     Vibration,
+    sensor_name,
     usable_series,
 )
 from altfuse.screen import NOT_CONVERGED, not_converged
@@ -293,10 +294,6 @@ def _instances(rec: _Records, type_name: str, field: str, default: int) -> Itera
         yield int(i), inst == i
 
 
-def _instance_name(kind: str, instance: int) -> str:
-    return kind if instance == 0 else f"{kind}{instance + 1}"
-
-
 class _Builder:
     """Collects the sources found in a log, with the reason for every one left out."""
 
@@ -358,10 +355,10 @@ def _add_instances(  # noqa: PLR0913 (what each instance's source is, as add() t
     left_out = (not_sensors or {}) if b.rec.has(type_name, instance_field) else {}
     for inst, sel in _instances(b.rec, type_name, instance_field, default):
         if inst in left_out:
-            b.dropped_sources[_instance_name(kind, inst)] = left_out[inst]
+            b.dropped_sources[sensor_name(kind, inst)] = left_out[inst]
             continue
         b.add(
-            name=_instance_name(kind, inst),
+            name=sensor_name(kind, inst),
             kind=kind,
             type_name=type_name,
             col=col,
@@ -442,7 +439,7 @@ def _read_baro(b: _Builder) -> bool:
             for inst, sel in _instances(b.rec, type_name, "I", default):
                 t, temp = b.rec.times(type_name)[sel], b.rec.column(type_name, "Temp")[sel]
                 keep = np.isfinite(t) & np.isfinite(temp)
-                name = _instance_name("baro", inst)
+                name = sensor_name("baro", inst)
                 if keep.any() and name not in b.temperatures:
                     b.temperatures[name] = Series(
                         name, "temperature", f"{type_name}.Temp", "degC", t[keep], temp[keep]
@@ -489,7 +486,7 @@ def _read_rangefinder(b: _Builder) -> bool:
                 continue
             found = True
             b.add(
-                name=_instance_name("rangefinder", inst),
+                name=sensor_name("rangefinder", inst),
                 kind="rangefinder",
                 type_name=rfnd,
                 col=dist,

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import itertools
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -53,6 +54,7 @@ from altfuse.model import (
     Samples,
     SensorKind,
     Series,
+    sensor_name,
     usable_series,
 )
 from altfuse.screen import MAX_BOOT_S, NOT_CONVERGED, not_converged
@@ -261,10 +263,8 @@ class _Sensors:
 
 
 def _names(kind: str) -> Iterator[str]:
-    """``gps``, ``gps2``, ``gps3``, ..."""
-    yield kind
-    for k in range(2, 1000):
-        yield f"{kind}{k}"
+    """``gps``, ``gps2``, ``gps3``, ...: :func:`~altfuse.model.sensor_name` in turn."""
+    return (sensor_name(kind, k) for k in itertools.count())
 
 
 def _read_gps(topics: _Topics, sensors: _Sensors) -> None:

@@ -275,7 +275,6 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
@@ -339,7 +338,7 @@ from altfuse.fuse.smoother.noise import (
 from altfuse.fuse.smoother.passes import FOR_EM, FOR_RESULT, HEIGHT_ONLY, run
 from altfuse.fuse.smoother.velocity import VELOCITY_NAME, checked_velocity, lag_regressor
 from altfuse.memory import release_free_memory
-from altfuse.model import SENSOR_KINDS, FloatArray, Samples
+from altfuse.model import SENSOR_KINDS, SENSOR_NAME, FloatArray, Samples
 from altfuse.params import InvalidParameter, Params, fields, flag_of, param
 from altfuse.steps import jump_instant
 
@@ -421,7 +420,8 @@ class SmootherParams(Params):
     )
 
     def __post_init__(self) -> None:
-        """A per-sensor value names a sensor as the readers name them (:data:`SENSOR_NAME`),
+        """A per-sensor value names a sensor as the readers name them
+        (:data:`altfuse.model.SENSOR_NAME`),
         whether or not a log has it: ``lidar`` never fuses, ``rangefinder`` where a log has one
         (a batch's logs differ)."""
         super().__post_init__()
@@ -432,12 +432,6 @@ class SmootherParams(Params):
                     f"names no sensor altfuse reads: {', '.join(map(repr, bad))}; sensors are "
                     f"named {', '.join(SENSOR_KINDS)}, from the second of a kind on gps2, ...",
                 )
-
-
-#: A sensor's name as the readers make it: its kind, numbered from the second of that kind on
-#: (``gps``, ``gps2``, ``rangefinder2``): what a per-sensor value of :class:`SmootherParams`
-#: may name.
-SENSOR_NAME = re.compile(rf"^(?:{'|'.join(SENSOR_KINDS)})(?:[2-9]|[1-9][0-9]+)?$")
 
 
 def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
