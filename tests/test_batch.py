@@ -33,6 +33,7 @@ from altfuse.batch import (
     doubted,
     find_logs,
     run_batch,
+    unused,
 )
 from altfuse.cli import cli
 from altfuse.errors import LogReadError, ParameterError
@@ -68,7 +69,7 @@ def test_batch_over_the_shared_logs_refuses_the_unfusable_and_exits_0(tmp_path: 
     assert result.exit_code == 0, result.output
     # no progress bar when stderr is not a terminal; one line on the log that needs a look
     assert result.stderr == (
-        "altfuse: warning: 1 of the 8 logs fused need a look (the summary's diverged and "
+        "altfuse: warning: 1 log of the 8 fused needs a look (the summary's diverged and "
         "model_check columns): rima48_test_cascade.BIN (model check failed)\n"
     )
     summary = pd.read_csv(out / "summary.csv", keep_default_na=False)
@@ -138,6 +139,15 @@ def test_a_sensor_value_applies_to_the_logs_that_have_the_sensor(tmp_path: Path)
     assert used["parameters"]["sigma_rangefinder_m"] == 0.05
     alone = CliRunner().invoke(cli, ["fuse", str(logs / "spark404_log.bin"), "-o", "-"])
     assert (out / "spark404_log.csv").read_text() == alone.stdout
+    # said once at the end, not once per log without the log's name (a worker's warning)
+    assert summary.not_used.fillna("").to_dict() == {
+        "beastayyg_log_0038_mechanical_failure.bin": "",
+        "spark404_log.bin": "sigma_m (--sigma): rangefinder",
+    }
+    assert [line for line in result.stderr.splitlines() if "not used" in line] == [
+        "altfuse: warning: not used in 1 log of the 2 fused, for want of the sensors (the "
+        "summary's not_used column): sigma_m (--sigma): rangefinder (spark404_log.bin)"
+    ]
 
 
 def test_the_logs_that_need_a_look_are_named_in_one_line() -> None:
@@ -157,15 +167,36 @@ def test_the_logs_that_need_a_look_are_named_in_one_line() -> None:
         LogResult("i.bin", "skipped"),
     ]
     assert doubted(results) == (
-        "4 of the 6 logs fused need a look (the summary's diverged and model_check columns): "
+        "4 logs of the 6 fused need a look (the summary's diverged and model_check columns): "
         "b.ulg (model check failed); d.bin (diverged on 3 ticks, model check failed); "
         "e.bin (diverged on 12 ticks); and 1 more"
     )
     assert doubted(results[4:]) == (
-        "1 of the 2 logs fused need a look (the summary's diverged and model_check columns): "
-        "f.bin (diverged on 1 ticks)"
+        "1 log of the 2 fused needs a look (the summary's diverged and model_check columns): "
+        "f.bin (diverged on 1 tick)"
     )
     assert doubted([results[1], results[5], *results[6:]]) is None
+
+
+def test_values_for_sensors_logs_lack_are_said_once_per_set() -> None:
+    """One line per set of values not used, with how many of the logs fused now did not use
+    it and the first three by name; not for a log refused, failed or skipped."""
+    sigma = "sigma_m (--sigma): rangefinder"
+    both = f"{sigma}; offset_noise_m2_s (--offset-noise): gps2"
+    results = [
+        *(LogResult(f"{n}.bin", "ok", not_used=sigma) for n in "edcba"),
+        LogResult("f.bin", "ok", not_used=both),
+        LogResult("g.bin", "ok"),
+        LogResult("h.bin", "failed", "cannot read", not_used=sigma),
+        LogResult("i.bin", "skipped", not_used=sigma),
+    ]
+    assert unused(results) == [
+        "not used in 5 logs of the 7 fused, for want of the sensors (the summary's "
+        f"not_used column): {sigma} (a.bin, b.bin, c.bin and 2 more)",
+        "not used in 1 log of the 7 fused, for want of the sensors (the summary's "
+        f"not_used column): {both} (f.bin)",
+    ]
+    assert unused(results[6:]) == []
 
 
 def test_all_ok_exits_0_and_mirrors_the_tree(tmp_path: Path) -> None:

@@ -416,6 +416,26 @@ def test_a_failed_model_check_is_one_warning_line(tmp_path: Path) -> None:
     assert checks[0].startswith("model check: smoother failed: mean squared normalised ")
 
 
+def test_a_value_for_a_sensor_the_log_lacks_is_one_line_with_the_log_name(
+    tmp_path: Path,
+) -> None:
+    # the smoother leaves it out and records it; fuse and evaluate say so, naming the log
+    result = run("fuse", SAMPLE_LOG, "-o", tmp_path / "o.csv", "--sigma", "gps2=0.5")
+    assert result.exit_code == 0, result.output
+    warned = [line for line in result.stderr.splitlines() if "not used" in line]
+    assert warned == [
+        f"altfuse: warning: {SAMPLE_LOG.name}: not used, as this log does not have the sensors "
+        "(its sensors: gps, baro, rangefinder): sigma_m (--sigma): gps2"
+    ]
+    meta = json.loads((tmp_path / "o.meta.json").read_text())
+    assert meta["parameters"]["not_used"] == "sigma_m (--sigma): gps2"
+    report = run("evaluate", SAMPLE_LOG, "--methods", "mean,smoother", "--sigma", "gps2=0.5")
+    assert report.exit_code == 0, report.output
+    assert report.stdout.splitlines()[-1] == (
+        "not used by smoother, as this log does not have the sensors: sigma_m (--sigma): gps2"
+    )
+
+
 def test_info_text_and_json() -> None:
     result = run("info", SAMPLE_LOG)
     assert result.exit_code == 0

@@ -149,16 +149,22 @@ def test_sigma_override_and_nonsense_options(tmp_path: Path) -> None:
 def test_a_sensor_the_log_lacks_is_not_used_and_said(caplog: pytest.LogCaptureFixture) -> None:
     """A per-sensor value for a sensor this log does not have was an error, which failed
     every log of a batch without it (``--sigma rangefinder=0.05`` over the shared ArduPilot
-    logs: 5 of 8 failed). It is said and not used; the result is the one without it."""
+    logs: 5 of 8 failed). It is not used, the result is the one without it, and the metadata
+    says so; the method itself logs nothing (a batch's workers printed it once per log, without
+    the log's name: the commands say it with the name)."""
     inputs = FusionInput.from_heights(np.column_stack([np.linspace(0, 5, 200)] * 2), 0.1)
     plain = fuse_smoother(inputs, SmootherParams())
+    assert "not_used" not in plain.params
+    values = SmootherParams(sigma_m={"rangefinder": 0.05}, offset_noise_m2_s={"gps2": 1, "gps": 1})
     with caplog.at_level(logging.WARNING, logger="altfuse"):
         given = fuse_smoother(inputs, SmootherParams(sigma_m={"rangefinder": 0.05}))
+        both = fuse_smoother(inputs, values)
     np.testing.assert_array_equal(given.fused, plain.fused)
-    assert caplog.messages == [
-        "sigma_m (--sigma) names rangefinder, which this log does not have (its sensors: gps, "
-        "baro): not used"
-    ]
+    assert caplog.messages == []
+    assert given.params["not_used"] == "sigma_m (--sigma): rangefinder"
+    assert both.params["not_used"] == (
+        "sigma_m (--sigma): rangefinder; offset_noise_m2_s (--offset-noise): gps2"
+    )
 
 
 def test_terrain_roughness_is_per_metre_flown() -> None:

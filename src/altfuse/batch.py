@@ -45,6 +45,7 @@ from altfuse.files import COMPRESSIONS, compression_named, stream_kind
 from altfuse.io import sha256_of
 from altfuse.job import FileRun, Outputs, run_to_files
 from altfuse.memory import one_heap
+from altfuse.model import counted
 from altfuse.params import InvalidParameter
 from altfuse.pipeline import FuseOptions
 from altfuse.signals import (
@@ -162,13 +163,14 @@ class LogResult:
     diverged: int = 0  # ticks whose fused value left every sensor (altfuse.guard)
     max_excursion_m: float | None = None  # the largest gap from the fused value to a sensor
     model_check: str = ""  # the smoother's check of its own noises: passed, or why not
+    not_used: str = ""  # values given for sensors this log does not have (--sigma, ...)
     truth: str = ""
     metrics: dict[str, float | None] = field(default_factory=dict)
 
     def doubts(self) -> list[str]:
         """What puts this log's fused altitude in question, as ``fuse`` warns of it: the ticks
         the guard flagged, the model's own check failed."""
-        found = [f"diverged on {self.diverged} ticks"] if self.diverged else []
+        found = [f"diverged on {counted(self.diverged, 'tick')}"] if self.diverged else []
         return found + (["model check failed"] if self.model_check.startswith("failed") else [])
 
 
@@ -182,9 +184,28 @@ def doubted(results: Sequence[LogResult]) -> str | None:
         return None
     more = f"; and {len(named) - 3} more" if len(named) > 3 else ""
     return (
-        f"{len(named)} of the {len(fused)} logs fused need a look (the summary's diverged and "
+        f"{counted(len(named), 'log')} of the {len(fused)} fused "
+        f"{'needs' if len(named) == 1 else 'need'} a look (the summary's diverged and "
         f"model_check columns): {'; '.join(named[:3])}{more}"
     )
+
+
+def unused(results: Sequence[LogResult]) -> list[str]:
+    """Lines for the end of a batch, one per set of values the logs fused now did not use as
+    they lack the sensors (:func:`altfuse.fuse.smoother.not_used`), the set the most logs share
+    first: how many logs, the first three by name. One option for a fleet fits some logs; the
+    others are said once, not once per log."""
+    fused = sorted((r for r in results if r.status == "ok"), key=lambda r: r.log)
+    sets = {r.not_used for r in fused} - {""}
+    by_values = {v: [r.log for r in fused if r.not_used == v] for v in sets}
+    lines = []
+    for values, logs in sorted(by_values.items(), key=lambda item: (-len(item[1]), item[0])):
+        more = f" and {len(logs) - 3} more" if len(logs) > 3 else ""
+        lines.append(
+            f"not used in {counted(len(logs), 'log')} of the {len(fused)} fused, for want of the "
+            f"sensors (the summary's not_used column): {values} ({', '.join(logs[:3])}{more})"
+        )
+    return lines
 
 
 def _described(name: str, done: FileRun, seconds: float) -> LogResult:
@@ -223,6 +244,7 @@ def _described(name: str, done: FileRun, seconds: float) -> LogResult:
         diverged=int(guarded["diverged_ticks"]),
         max_excursion_m=guarded["max_excursion_m"],
         model_check=str(run.result.params.get("model_check", "")),
+        not_used=str(run.result.params.get("not_used", "")),
         truth=label,
         metrics=metrics,
     )

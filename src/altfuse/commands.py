@@ -30,6 +30,7 @@ from altfuse.batch import (
     doubted,
     run_batch,
     summary_name,
+    unused,
 )
 from altfuse.evaluation import TRUTHS, Evaluation, TruthChoice, method_names
 from altfuse.evaluation import evaluate as evaluate_log
@@ -39,6 +40,7 @@ from altfuse.info import as_text, damage, describe
 from altfuse.io import read_log
 from altfuse.job import Outputs, run_to_files
 from altfuse.metrics import ErrorStats
+from altfuse.model import counted
 from altfuse.params import UNIT_SUFFIXES, InvalidParameter, fields, flag_of, hints, unit_of
 from altfuse.pipeline import FuseOptions
 from altfuse.plot import check_plot_path, run_figure, writer
@@ -355,12 +357,18 @@ def fuse(
     if record["diverged_ticks"]:
         lost = f", {record['lost_ticks']} of them without a value" if record["lost_ticks"] else ""
         logging.getLogger("altfuse").warning(
-            "%s: %s left every sensor on %d ticks (by up to %.1f m%s): status 'diverged'",
-            log.name, method, record["diverged_ticks"], record["max_excursion_m"], lost,
+            "%s: %s left every sensor on %s (by up to %.1f m%s): status 'diverged'",
+            log.name, method, counted(record["diverged_ticks"], "tick"), record["max_excursion_m"],
+            lost,
         )  # fmt: skip
     check = run.result.params.get("model_check", "passed")
     if check != "passed":
         logging.getLogger("altfuse").warning("%s: %s's model check %s", log.name, method, check)
+    if unused_here := run.result.params.get("not_used"):
+        logging.getLogger("altfuse").warning(
+            "%s: not used, as this log does not have the sensors (its sensors: %s): %s",
+            log.name, ", ".join(run.referred.names), unused_here,
+        )  # fmt: skip
     counts = run.provenance["status_counts"]
     sidecar = done.written.get("meta", "none")
     if streamed and not logging.getLogger("altfuse").isEnabledFor(logging.WARNING):
@@ -547,16 +555,21 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
 
 
 def _verdicts(result: Evaluation) -> list[str]:
-    """What the table does not say: the methods not run, those that diverged, and those whose
-    own model check failed."""
+    """What the table does not say: the methods not run, those that diverged, those whose own
+    model check failed, and values given for sensors this log does not have."""
     lines = [f"not run: {method}: {why}" for method, why in result.failed.items()]
     lines += [
-        f"diverged: {method} left every sensor on {found['diverged_ticks']} ticks "
+        f"diverged: {method} left every sensor on {counted(found['diverged_ticks'], 'tick')} "
         f"(by up to {found['max_excursion_m']:.1f} m)"
         for method, found in result.diverged().items()
     ]
     checks = {m: r.result.params.get("model_check", "passed") for m, r in result.runs.items()}
-    return lines + [f"model check: {m} {c}" for m, c in checks.items() if c != "passed"]
+    lines += [f"model check: {m} {c}" for m, c in checks.items() if c != "passed"]
+    return lines + [
+        f"not used by {m}, as this log does not have the sensors: {r.result.params['not_used']}"
+        for m, r in result.runs.items()
+        if "not_used" in r.result.params
+    ]
 
 
 class _Progress:
@@ -703,10 +716,10 @@ def batch(  # noqa: PLR0913 (one argument per option: click's way)
     )
     counts = {s: sum(r.status == s for r in results) for s in get_args(Outcome)}
     look = doubted(results)
-    if look:
-        logging.getLogger("altfuse").warning("%s", look)
+    for line in ([look] if look else []) + unused(results):
+        logging.getLogger("altfuse").warning("%s", line)
     click.echo(
-        f"{output / summary_name(shard)}: {len(results)} logs, "
+        f"{output / summary_name(shard)}: {counted(len(results), 'log')}, "
         + ", ".join(f"{k} {v}" for k, v in counts.items())
     )
     if counts["failed"]:

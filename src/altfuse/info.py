@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from altfuse.errors import AltfuseError
-from altfuse.model import FlightLog, Series
+from altfuse.model import FlightLog, Series, counted
 from altfuse.pipeline import (
     FuseOptions,
     Prepared,
@@ -49,7 +49,9 @@ def damage(flight: FlightLog) -> str | None:
     """One line on what reading left out: damage, bytes skipped, implausible samples dropped."""
     parts = list(flight.damaged)
     if flight.skipped_bytes:
-        parts.append(f"{flight.skipped_bytes} bytes skipped (not part of any decodable record)")
+        parts.append(
+            f"{counted(flight.skipped_bytes, 'byte')} skipped (not part of any decodable record)"
+        )
     implausible = implausible_count(flight)
     if implausible:
         per = ", ".join(f"{name} {n}" for name, n in implausible.items())

@@ -80,6 +80,11 @@ class _Brief(reprlib.Repr):
         return f"{type(x).__name__}({', '.join(shown)})"
 
 
+def counted(n: int, noun: str) -> str:
+    """``n`` and ``noun``, plural but for one: ``"1 tick"``, ``"3 ticks"``, ``"0 ticks"``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 def brief_repr(self: object) -> str:
     """``__repr__`` for the values that hold samples: :class:`_Brief`'s."""
     return _BRIEF.repr(self)

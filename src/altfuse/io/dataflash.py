@@ -60,6 +60,7 @@ from altfuse.model import (
     Series,
     SeriesKind,
     Vibration,
+    counted,
     sensor_name,
     usable_series,
 )
@@ -841,7 +842,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     rec.done("GPS", "GPS2", "GPS3")
     skipped = rec.index.size - rec.index.decoded_bytes
     if skipped:
-        b.notes.append(f"{skipped} bytes were not part of any decodable record")
+        b.notes.append(f"{counted(skipped, 'byte')} not part of any decodable record")
     for what, problem in rec.problems.items():  # after every read: reading finds some
         b.notes.append(f"{what}: not read: {problem}")
         if what.split(".")[0] in _SENSOR_TYPES:

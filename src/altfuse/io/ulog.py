@@ -54,6 +54,7 @@ from altfuse.model import (
     Samples,
     SensorKind,
     Series,
+    counted,
     sensor_name,
     usable_series,
 )
@@ -407,8 +408,8 @@ def _devices(
     ]
     changes = int(np.count_nonzero(np.diff(inverse)))
     sensors.notes.append(
-        f"vehicle_air_data: the barometer or its calibration changed {changes} "
-        f"time{'s' if changes > 1 else ''} ({'; '.join(names)}): each read as its own barometer"
+        f"vehicle_air_data: the barometer or its calibration changed {counted(changes, 'time')} "
+        f"({'; '.join(names)}): each read as its own barometer"
     )
     masks = [inverse == u for u in order]
     return [

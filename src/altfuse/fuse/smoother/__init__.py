@@ -235,7 +235,8 @@ innovation ``y^2 / S`` of its accepted samples (1 where the model's noises are r
 ``model_check``: failed where one averages above ``NIS_CHECK`` (the commands warn). It does
 not see every error: a random-walk offset absorbs a slow one (on the simulators' logs the
 check reads 0.1-1.3 where the +-2 sigma coverage runs from 0.63 to 1.00; the velocity's
-0.01-0.3, its floor above its noise there).
+0.01-0.3, its floor above its noise there). And ``not_used``, where given: the per-sensor
+values for sensors this log does not have (:func:`not_used`; the commands warn).
 
 Measured (``benchmarks/smoother_accuracy.py``, 210 simulated flights): the lowest RMSE of all
 methods on every one (the closest: the climb with seed 1 and its barometer 7 % high, 0.84 of
@@ -445,8 +446,6 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     coefficient) and ``on_ground_s`` (there ``h = 0`` and ``v = 0``) when the log has them.
     """
     names, kinds, samples = inputs.names, inputs.kinds, inputs.samples
-    _say_unused(params.sigma_m, names, "sigma_m")
-    _say_unused(params.offset_noise_m2_s, names, "offset_noise_m2_s")
     m = len(samples)
     accel = None if inputs.accel is None else inputs.accel.samples
     use_imu = accel is not None and accel.t.size >= 2
@@ -549,6 +548,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             **rejected,
             **nis,
             "model_check": model_check(nis),
+            **({"not_used": unused} if (unused := not_used(params, names)) else {}),
             # each step between two sensors (altfuse.steps) and whose jump the smoother made it:
             # "t s: +x m, gps" (the GPS jumped x), "t s: +x m, gps or baro" (the barometer's
             # heights less the GPS's jumped x, either may have)
@@ -853,13 +853,12 @@ def _fitted(
     }
 
 
-def _say_unused(values: Mapping[str, float], names: Sequence[str], field: str) -> None:
-    """Warn of the per-sensor values (``field``'s) for sensors this log does not have
-    (``names``: its sensors'): not used. They were an error, which failed every log of a batch
-    without the sensor (``--sigma rangefinder=0.05`` over a fleet's logs: 5 of 8 failed)."""
-    if unused := sorted(set(values) - set(names)):
-        flag = next(flag_of(f) for f in fields(SmootherParams) if f.name == field)
-        logging.getLogger("altfuse").warning(
-            "%s (%s) names %s, which this log does not have (its sensors: %s): not used",
-            field, flag, ", ".join(unused), ", ".join(names),
-        )  # fmt: skip
+def not_used(params: SmootherParams, names: Sequence[str]) -> str:
+    """The per-sensor values given for sensors this log does not have (``names``: its
+    sensors'), not used: ``"sigma_m (--sigma): rangefinder"``, one such part per field, ``""``
+    where every value was used. They were an error, which failed every log of a batch without
+    the sensor (``--sigma rangefinder=0.05`` over a fleet's logs: 5 of 8 failed); the metadata
+    records them, and the commands say so with the log's name."""
+    per_sensor = [f for f in fields(SmootherParams) if f.name in ("sigma_m", "offset_noise_m2_s")]
+    unused = {f: sorted(set(getattr(params, f.name)) - set(names)) for f in per_sensor}
+    return "; ".join(f"{f.name} ({flag_of(f)}): {', '.join(u)}" for f, u in unused.items() if u)
