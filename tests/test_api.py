@@ -135,3 +135,18 @@ def test_a_simulated_flight_from_python_is_the_command_s_log(tmp_path: Path) -> 
     report = altfuse.evaluate(ours, "smoother")
     assert report.truth.name == "sim"
     assert report.table().rmse[0] < 0.5
+    # a seed or a duration that is no number is said in the library's words (numpy's "expected
+    # non-negative integer" and a TypeError before; the string "60" was taken as 60 s)
+    same = altfuse.simulate_flight("hover", np.int64(2), faults="gps-glitch")
+    altfuse.write_simulated_log(same, tmp_path / "same.bin")
+    assert (tmp_path / "same.bin").read_bytes() == ours.read_bytes()
+    assert type(same.seed) is int
+    for seed, said in ((-1, "-1"), (1.5, "1.5"), ("1", "'1'"), (True, "True")):
+        with pytest.raises(
+            InvalidParameter, match=rf"^seed must be a whole number >= 0, got {said}$"
+        ):
+            altfuse.simulate_flight("hover", seed)  # type: ignore[arg-type]
+    with pytest.raises(
+        InvalidParameter, match=r"^duration_s must be a number of seconds, got '60'"
+    ):
+        altfuse.simulate_flight("hover", 1, duration_s="60")  # type: ignore[arg-type]

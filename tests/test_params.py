@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import re
 
+import numpy as np
 import pytest
 
 from altfuse.errors import ParameterError
@@ -62,6 +63,14 @@ def test_fuse_options_know_the_methods_and_their_parameter_types() -> None:
     options = FuseOptions(method="delay2", params={"delay1": DelayParams(form="paper")})
     assert options.params_of() == DelayParams()  # delay2: not given, its defaults
     assert options.params_of("delay1").form == "paper"  # type: ignore[attr-defined]
+    # one method's parameters alone are the method's (an AttributeError 'items' before)
+    assert FuseOptions("support", SupportParams(beta=5)).params == {
+        "support": SupportParams(beta=5)
+    }
+    with pytest.raises(ParameterError, match="'mean' takes Params, not SupportParams"):
+        FuseOptions("mean", SupportParams())
+    with pytest.raises(ParameterError, match=r"^params must be a method's parameters or map "):
+        FuseOptions("support", [SupportParams()])  # type: ignore[arg-type]
 
 
 def test_values_are_stored_in_their_canonical_form() -> None:
@@ -75,6 +84,14 @@ def test_values_are_stored_in_their_canonical_form() -> None:
         SmootherParams(sigma_m={"gps": -1})
     with pytest.raises(InvalidParameter, match="sigma_m must map sensor names to numbers"):
         SmootherParams(sigma_m=[("gps", 1.0)])  # type: ignore[arg-type]
+    # numpy's numbers are numbers: np.float32(1) was "must be a positive number"
+    gate = np.float32(4)
+    float32 = SmootherParams(sigma_m={"gps": np.float32(0.5)}, gate_sigma=gate)
+    assert float32.sigma_m == {"gps": 0.5}
+    assert type(float32.gate_sigma) is float
+    assert FuseOptions(min_sensors=np.int64(3)).min_sensors == 3
+    with pytest.raises(InvalidParameter, match="takeoff_climb_m must be a positive number, got"):
+        FuseOptions(takeoff_climb_m=np.bool_(True))  # type: ignore[arg-type]
 
 
 def test_parameters_are_keyword_only() -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -113,8 +114,10 @@ def hints(cls: type[Any]) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
+def is_number(value: Any) -> bool:
+    """A real number, not a truth value: Python's and numpy's (``np.float32(1)``, ``np.int64``,
+    which are no ``float`` nor ``int``: refused as "must be a positive number" before)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 def _check_value(f: dataclasses.Field[Any], hint: Any, value: Any) -> Any:
@@ -136,7 +139,7 @@ def _check_value(f: dataclasses.Field[Any], hint: Any, value: Any) -> Any:
         hint = next(a for a in args if a is not type(None))
     test, wanted = _CHECKS[f.metadata["check"]]
     whole = hint is int
-    if not _is_number(value) or (whole and not float(value).is_integer()):
+    if not is_number(value) or (whole and not float(value).is_integer()):
         raise InvalidParameter(f.name, f"must be {wanted}, got {value!r}")
     if not (math.isfinite(value) and test(value)):
         raise InvalidParameter(f.name, f"must be {wanted}, got {value!r}")

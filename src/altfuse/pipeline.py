@@ -7,7 +7,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -50,11 +50,12 @@ class FuseOptions:
     """Everything that decides a fusion run besides the log itself; checked when built.
 
     ``params`` holds the parameters of any method by its name (as ``altfuse evaluate`` runs
-    several); a method not in it runs with its defaults.
+    several); a method not in it runs with its defaults. One method's parameters alone are
+    ``method``'s (``FuseOptions("support", SupportParams(beta=5))``).
     """
 
     method: str = DEFAULT_METHOD
-    params: Mapping[str, Params] = field(default_factory=dict)
+    params: Mapping[str, Params] | Params = field(default_factory=dict)
     rate_hz: float = param(
         10.0, help="rate of the common clock", unit="Hz", check="positive", maximum=1000.0
     )
@@ -84,6 +85,13 @@ class FuseOptions:
     def __post_init__(self) -> None:
         validate(self)
         method(self.method)
+        if isinstance(self.params, Params):
+            object.__setattr__(self, "params", {self.method: self.params})
+        if not isinstance(self.params, Mapping):
+            raise ParameterError(
+                f"params must be a method's parameters or map method names to them, got "
+                f"{type(self.params).__name__}"
+            )
         for name, given in self.params.items():
             wanted = method(name).params
             if type(given) is not wanted:
@@ -96,7 +104,7 @@ class FuseOptions:
     def params_of(self, name: str | None = None) -> Params:
         """The parameters method ``name`` (default: ``method``) runs with."""
         name = name or self.method
-        given = self.params.get(name)
+        given = cast("Mapping[str, Params]", self.params).get(name)  # a dict since built
         return method(name).params() if given is None else given
 
 

@@ -64,7 +64,7 @@ from altfuse.errors import ParameterError
 from altfuse.inertial import G
 from altfuse.io.dataflash import EV_EKF_ALT_RESET
 from altfuse.model import FloatArray, brief_repr
-from altfuse.params import InvalidParameter
+from altfuse.params import InvalidParameter, is_number
 from altfuse.write import atomic_outputs, check_log_path
 
 HOME_AMSL_M = 112.0
@@ -420,6 +420,10 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     if scenario not in SCENARIOS:
         raise ParameterError(f"unknown scenario {scenario!r}; choose one of {', '.join(SCENARIOS)}")
     spec = SCENARIOS[scenario]
+    if not (is_number(seed) and float(seed).is_integer() and seed >= 0):
+        raise InvalidParameter("seed", f"must be a whole number >= 0, got {seed!r}")
+    if duration_s is not None and not is_number(duration_s):
+        raise InvalidParameter("duration_s", f"must be a number of seconds, got {duration_s!r}")
     duration = spec.default_duration_s if duration_s is None else float(duration_s)
     if not spec.min_duration_s <= duration <= MAX_DURATION_S:  # and not NaN
         raise InvalidParameter(
@@ -434,7 +438,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
         able = ", ".join(n for n in SCENARIOS if refused[0] in applicable_faults(n))
         need = "land" if refused[0] in LANDING_FAULTS else "cruise"
         raise ParameterError(f"{scenario} does not {need}: {refused[0]} needs one of {able}")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(int(seed))
     t = np.arange(0.0, duration, DT_S)
     p = spec.make(t, duration)
     records: Records = {}
@@ -586,7 +590,7 @@ def simulate_flight(  # noqa: C901, PLR0915 (one flight's sensor models in turn,
     roll_logged = np.where(np.abs(roll_logged) > 180.0, wrapped, roll_logged)
     log("ATT", ts, roll_logged, np.rad2deg(sensed(ts, p.pitch)), 0.0)
     log("SIM", ts, HOME_AMSL_M + truth(ts, p.height_m))
-    return SimulatedFlight(scenario, seed, duration, faults, p, records, latency, gps_lag)
+    return SimulatedFlight(scenario, int(seed), duration, faults, p, records, latency, gps_lag)
 
 
 _TYPES = {
