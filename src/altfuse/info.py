@@ -147,14 +147,19 @@ def as_text(summary: dict[str, Any]) -> list[str]:
     lines += _datum_text(summary["datum"])
     refs = ", ".join(f"{r['name']} ({r['source']}, {r['datum']})" for r in summary["references"])
     imu, att = summary["imu"], summary["attitude"]
-    implausible = sum(summary["implausible_samples"].values())
+    names = {s["name"] for s in summary["sensors"]}
+    implausible = summary["implausible_samples"]
+    of_sensors = sum(n for name, n in implausible.items() if name in names)
+    inputs = ", ".join(f"{name} {n}" for name, n in implausible.items() if name not in names)
     lines += [
         f"references (never fused): {refs or 'none'}",
         f"IMU: {imu['samples'] if imu else 'no'} samples; "
         f"attitude: {att['samples'] if att else 'no'} samples",
         f"skipped bytes: {summary['skipped_bytes']}",
-        f"dropped samples: {summary['samples_dropped_total']} (by the reader's filters and as "
-        f"implausible: {implausible})",
+        f"dropped samples: {summary['samples_dropped_total']} of the altitude sources "
+        f"({of_sensors} implausible; the others filtered by the reader or beyond a "
+        "rangefinder's range: each source's line)",
+        *([f"dropped as implausible from the other inputs: {inputs}"] if inputs else []),
     ]
     return lines + [f"note: {note}" for note in summary["notes"]]
 

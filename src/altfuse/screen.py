@@ -68,6 +68,11 @@ NO_PLAUSIBLE_SAMPLE = "no plausible sample"
 REASONS = (
     BEYOND_BOOT, BACKWARDS, OUTSIDE_LOG, ENVELOPE, CODE, PINNED, SPIKE, BELOW_MINIMUM, STUCK,
 )  # fmt: skip
+#: A rangefinder beyond its range: the sensor at its limits (on the ground, above its reach),
+#: which the readers' status filters drop unsaid where the log has a status (``RFND.Stat``);
+#: dropped and counted per source, and no implausible sample (every simulated log warned of
+#: some).
+OUT_OF_RANGE = (CODE, PINNED, BELOW_MINIMUM)
 
 #: The largest specific force an autopilot's IMU reports [m/s^2]: +-16 g is the common range,
 #: +-40 g the largest ArduPilot drives (ADIS16470); beyond 50 g a sample is corrupt.
@@ -436,8 +441,10 @@ def screened_out(flight: FlightLog) -> list[str]:
 
 
 def implausible_count(flight: FlightLog) -> dict[str, int]:
-    """Samples dropped by screening, per altitude source (the reader's own filters excluded)
-    and per other input (``IMU[0].Acc``, ``ATT``, ...)."""
-    counts = {s.name: sum(n for r, n in s.dropped.items() if r in REASONS) for s in flight.sensors}
+    """Samples dropped by screening as implausible, per altitude source (the reader's own
+    filters and a rangefinder beyond its range, ``OUT_OF_RANGE``, excluded) and per other input
+    (``IMU[0].Acc``, ``ATT``, ...)."""
+    faults = set(REASONS) - set(OUT_OF_RANGE)
+    counts = {s.name: sum(n for r, n in s.dropped.items() if r in faults) for s in flight.sensors}
     counts.update(flight.dropped_inputs)
     return {name: n for name, n in counts.items() if n}
