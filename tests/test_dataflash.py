@@ -179,6 +179,41 @@ def test_reading_a_damaged_log_prints_nothing(capfd: pytest.CaptureFixture[str])
     assert flight.skipped_bytes == 50723
 
 
+@pytest.mark.parametrize(
+    ("tail", "skipped", "note"),
+    [
+        (b"\xa3", 0, "the log ends inside its last record (1 byte of its header)"),
+        (b"\xa3\x95", 0, "the log ends inside its last record (2 bytes of its header)"),
+        (b"\xa3\x95\x80" + bytes(40), 0, "the log ends inside its last record (FMT, 43 of its 89"),
+        (b"\x00", 1, "1 byte not part of any decodable record"),
+        (b"\xa3\x00\xa3", 3, "3 bytes not part of any decodable record"),
+    ],
+    ids=["header-1", "header-2", "record", "zero", "no-record"],
+)
+def test_a_log_that_ends_inside_a_record_has_no_skipped_bytes(
+    tmp_path: Path, tail: bytes, skipped: int, note: str
+) -> None:
+    """Nearly every real log ends inside a record, where the autopilot stopped writing (15 of
+    the 20 shared ArduPilot logs, 4-40 bytes): a note, not skipped bytes, which warned on each.
+    Bytes that begin no record are still skipped."""
+    path = tmp_path / "cut.bin"
+    path.write_bytes(SAMPLE_LOG.read_bytes() + tail)
+    flight = read_log(path)
+    assert flight.skipped_bytes == skipped
+    assert flight.notes[-1].startswith(note)
+    assert [s.value.size for s in flight.sensors] == [
+        s.value.size for s in read_log(SAMPLE_LOG).sensors
+    ]
+
+
+def test_a_real_log_s_last_record_cut_is_a_note() -> None:
+    solo = read_log(shared_log("truth/copter_3.4dev-solo_djnugent_climb154m_ekf1.BIN"))
+    assert solo.skipped_bytes == 0
+    assert solo.notes[-1] == (
+        "the log ends inside its last record (IMU2, 17 of its 45 bytes): read up to the one before"
+    )
+
+
 def test_ctun_fallbacks_and_multi_instance_gps() -> None:
     flight = read_log(shared_log("ardupilot/diaven_sample01.bin"))
     sources = {s.name: s for s in flight.sensors}

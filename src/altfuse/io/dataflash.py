@@ -47,7 +47,7 @@ import numpy.typing as npt
 from altfuse.errors import LogReadError
 from altfuse.io import hashing
 from altfuse.io.fastdf import Format, Index, _text, index_file
-from altfuse.io.framing import FORMAT_TO_STRUCT
+from altfuse.io.framing import FORMAT_TO_STRUCT, HEADER
 from altfuse.metrics import mad_sigma
 from altfuse.model import (
     DOWNWARD,
@@ -840,7 +840,16 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     course = _read_gps_field(rec, "GCrs", b.not_converged)
     climb = _read_gps_field(rec, "VZ", b.not_converged, sign=-1.0)
     rec.done("GPS", "GPS2", "GPS3")
-    skipped = rec.index.size - rec.index.decoded_bytes
+    index = rec.index
+    cut = 0
+    if index.cut_at is not None:  # the end of nearly every log: its writing stopped mid-record
+        cut = index.size - index.cut_at
+        what = f"{counted(cut, 'byte')} of its header"
+        if cut >= HEADER:
+            cut_type = index.formats[int(index.data[index.cut_at + 2])]
+            what = f"{cut_type.name}, {cut} of its {cut_type.length} bytes"
+        b.notes.append(f"the log ends inside its last record ({what}): read up to the one before")
+    skipped = index.size - index.decoded_bytes - cut
     if skipped:
         b.notes.append(f"{counted(skipped, 'byte')} not part of any decodable record")
     for what, problem in rec.problems.items():  # after every read: reading finds some

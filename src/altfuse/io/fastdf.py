@@ -20,8 +20,9 @@ What this module changes is the *how*: instead of one Python object per record, 
    offset from a strided view of the file, then read through a structured dtype built from the
    type's format string.
 
-Like pymavlink's parser, the walk stops at the first record that the file ends inside, and a
-type is known only from its FMT record on. The bytes not in any record are the skipped bytes.
+Like pymavlink's parser, the walk stops at the first record that the file ends inside (where
+every log ends that the autopilot stopped writing mid-record: ``Index.cut_at``), and a type is
+known only from its FMT record on. The other bytes not in any record are the skipped bytes.
 
 A FMT record that cannot describe its records truthfully keeps its length (the walk steps over
 its records as pymavlink's does) but gets a ``problem``, and the reader decodes none of its
@@ -115,7 +116,8 @@ class Format:
 
 @dataclass
 class Index:
-    """Where the records are: offsets and type ids of the chain, and the formats."""
+    """Where the records are: offsets and type ids of the chain, the formats, and where the
+    record the file ends inside begins (None where it ends between records)."""
 
     data: npt.NDArray[np.uint8]
     offsets: npt.NDArray[np.integer[Any]]
@@ -123,6 +125,7 @@ class Index:
     formats: dict[int, Format]
     size: int
     mapped: mmap.mmap | None = field(default=None, repr=False)  # the mapping ``data`` views
+    cut_at: int | None = None
 
     @cached_property
     def per_type(self) -> npt.NDArray[np.int64]:
@@ -271,9 +274,10 @@ def _records(
     mapped: mmap.mmap | None,
     formats: dict[int, Format],
     first: dict[int, int],
-) -> tuple[npt.NDArray[np.integer[Any]], npt.NDArray[np.uint8]]:
+) -> tuple[npt.NDArray[np.integer[Any]], npt.NDArray[np.uint8], int | None]:
     """The record chain under ``formats`` (see :func:`_walk`): offsets (int32 below 2 GiB) and
-    types, walked a chunk of the file at a time, each chunk's pages released once passed."""
+    types, walked a chunk of the file at a time, each chunk's pages released once passed; and
+    where the record the file ends inside begins (None where there is none)."""
     known = np.zeros((2, 256), dtype=np.int64)  # each type's length, and where it is defined
     known[1] = np.iinfo(np.int64).max
     for type_id, fmt in formats.items():
@@ -289,7 +293,8 @@ def _records(
         found.append((offsets[:n].copy(), types[:n].copy()))
         _release(mapped, released, at)
         released = at
-    return np.concatenate([f[0] for f in found]), np.concatenate([f[1] for f in found])
+    chain = np.concatenate([f[0] for f in found]), np.concatenate([f[1] for f in found])
+    return *chain, at if cut else None
 
 
 @compiled
@@ -377,7 +382,7 @@ def index_file(path: str | Path) -> Index:
     # definitions they make are stable.
     formats, first = _formats(data, definers)
     for _ in range(3):
-        offsets, types = _records(data, mapped, formats, first)
+        offsets, types, cut_at = _records(data, mapped, formats, first)
         fmt_at = offsets[types == FMT_TYPE]  # both sorted: np.isin's hashing took 0.8 s
         where = np.minimum(np.searchsorted(fmt_at, definers), max(fmt_at.size - 1, 0))
         on_chain = fmt_at[where] == definers if fmt_at.size else np.zeros(definers.size, bool)
@@ -385,4 +390,8 @@ def index_file(path: str | Path) -> Index:
         if chained == (formats, first):
             break
         formats, first = chained
-    return Index(data, offsets, types, formats, size, mapped)
+    if cut_at is None and offsets.size:  # the file may end inside the header of a record too
+        tail = int(offsets[-1]) + formats[int(types[-1])].length
+        if 0 < size - tail < HEADER and bytes(data[tail:]) == SYNC[: size - tail]:
+            cut_at = tail
+    return Index(data, offsets, types, formats, size, mapped, cut_at)
