@@ -293,6 +293,10 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
     velocity = _samples(flight.vertical_velocity)
     if velocity is not None and "gps" in prepared.lags:
         velocity = Samples(velocity.t - prepared.lags["gps"].lag_s, velocity.value)
+    dt = 1.0 / prepared.aligned.rate_hz
+    span = (referred.t[0] - dt, referred.t[-1] + dt)
+    samples = tuple(_within(s, span) for s in referred_samples(prepared.sensors, referred))
+    velocity = None if velocity is None else _within(velocity, span)
     imu_rate = None
     if flight.imu is not None and flight.imu.t.size > 1:
         step = float(np.median(np.diff(flight.imu.t)))
@@ -302,8 +306,8 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         z=referred.h,
         names=referred.names,
         kinds=referred.kinds,
-        samples=referred_samples(prepared.sensors, referred),
-        dt_s=1.0 / prepared.aligned.rate_hz,
+        samples=samples,
+        dt_s=dt,
         on_ground_s=_on_ground(referred),
         splices=tuple((s.start_s, s.grounded) for s in referred.segments[1:]),
         track=_track(flight),
@@ -320,6 +324,12 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         steps=_jumps(referred, tentative=False),
         tentative=_jumps(referred, tentative=True),
     )
+
+
+def _within(samples: Samples, span: tuple[float, float]) -> Samples:
+    """``samples`` within ``span`` [s]."""
+    keep = (samples.t >= span[0]) & (samples.t <= span[1])
+    return Samples(samples.t[keep], samples.value[keep])
 
 
 def _jumps(referred: Referred, *, tentative: bool) -> tuple[Jump, ...]:
