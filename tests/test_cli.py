@@ -439,6 +439,19 @@ def test_a_value_for_a_sensor_the_log_lacks_is_one_line_with_the_log_name(
     )
 
 
+def test_a_sensor_the_datum_leaves_out_is_one_warning_line(tmp_path: Path) -> None:
+    # a ground window of 0.2 s holds no sample of a 5 Hz GPS: it was gone from the table, with
+    # only the summary line's list of sensors to say so
+    log = shared_log("truth/copter_4.0.7_eduardoavila_sonar_9m.BIN")
+    result = run("fuse", log, "-o", tmp_path / "o.csv", "--ground-window", "0.2")
+    assert result.exit_code == 0, result.output
+    why = "gps: no sample on the ground and too few beside baro, rangefinder to find its datum"
+    assert result.stderr == f"altfuse: warning: {log.name}: left out: {why}\n"
+    report = run("evaluate", log, "--methods", "smoother", "--ground-window", "0.2")
+    assert report.stdout.splitlines()[-1] == f"left out: {why}"
+    assert run("fuse", log, "-o", tmp_path / "p.csv").stderr == ""
+
+
 def test_info_text_and_json() -> None:
     result = run("info", SAMPLE_LOG)
     assert result.exit_code == 0

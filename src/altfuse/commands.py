@@ -353,6 +353,8 @@ def fuse(
     warning = damage(run.log)
     if warning:
         logging.getLogger("altfuse").warning("%s", warning)
+    if run.referred.dropped:
+        logging.getLogger("altfuse").warning("%s: %s", log.name, _left_out(run.referred.dropped))
     record = run.provenance["guard"]
     if record["diverged_ticks"]:
         lost = f", {record['lost_ticks']} of them without a value" if record["lost_ticks"] else ""
@@ -554,10 +556,20 @@ def evaluate(  # noqa: PLR0913 (one argument per option: click's way)
             stage(plot_path, writer(fig, plot_path), binary=True)
 
 
+def _left_out(dropped: dict[str, str]) -> str:
+    """The altitude sources the log has with samples that could not be referred to the
+    take-off, and why (a GPS of 5 Hz has no sample in a ground window of 0.2 s): a sensor
+    gone from the table, which the summary line alone said."""
+    return "left out: " + "; ".join(f"{name}: {why}" for name, why in dropped.items())
+
+
 def _verdicts(result: Evaluation) -> list[str]:
-    """What the table does not say: the methods not run, those that diverged, those whose own
-    model check failed, and values given for sensors this log does not have."""
-    lines = [f"not run: {method}: {why}" for method, why in result.failed.items()]
+    """What the table does not say: the sensors left out, the methods not run, those that
+    diverged, those whose own model check failed, and values given for sensors this log does
+    not have."""
+    dropped = result.prepared.referred.dropped
+    lines = [_left_out(dropped)] if dropped else []
+    lines += [f"not run: {method}: {why}" for method, why in result.failed.items()]
     lines += [
         f"diverged: {method} left every sensor on {counted(found['diverged_ticks'], 'tick')} "
         f"(by up to {found['max_excursion_m']:.1f} m)"
