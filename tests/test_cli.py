@@ -439,7 +439,7 @@ def test_a_value_for_a_sensor_the_log_lacks_is_one_line_with_the_log_name(
     )
 
 
-def test_a_sensor_the_datum_leaves_out_is_one_warning_line(tmp_path: Path) -> None:
+def test_a_sensor_the_datum_leaves_out_is_said_and_in_the_report(tmp_path: Path) -> None:
     # a ground window of 0.2 s holds no sample of a 5 Hz GPS: it was gone from the table, with
     # only the summary line's list of sensors to say so
     log = shared_log("truth/copter_4.0.7_eduardoavila_sonar_9m.BIN")
@@ -447,8 +447,14 @@ def test_a_sensor_the_datum_leaves_out_is_one_warning_line(tmp_path: Path) -> No
     assert result.exit_code == 0, result.output
     why = "gps: no sample on the ground and too few beside baro, rangefinder to find its datum"
     assert result.stderr == f"altfuse: warning: {log.name}: left out: {why}\n"
-    report = run("evaluate", log, "--methods", "smoother", "--ground-window", "0.2")
-    assert report.stdout.splitlines()[-1] == f"left out: {why}"
+    args = ["--methods", "smoother,mean", "--ground-window", "0.2", "--sigma", "gps2=1"]
+    report = run("evaluate", log, *args, "-o", tmp_path / "r.json")
+    assert report.stdout.splitlines()[-2] == f"left out: {why}"
+    # the JSON report holds what the text says under the table
+    written = json.loads((tmp_path / "r.json").read_text())
+    assert written["sensors_dropped"] == {why.split(": ")[0]: why.split(": ", 1)[1]}
+    assert written["model_check"] == {"smoother": "passed"}
+    assert written["not_used"] == {"smoother": "sigma_m (--sigma): gps2"}
     assert run("fuse", log, "-o", tmp_path / "p.csv").stderr == ""
 
 

@@ -108,6 +108,14 @@ class Evaluation:
             ],
             "failed": self.failed,
             "diverged": self.diverged(),
+            # what the text report says under its table, as the sidecar of each run holds it
+            "sensors_dropped": self.prepared.dropped,
+            **{
+                key: {
+                    m: r.result.params[key] for m, r in self.runs.items() if key in r.result.params
+                }
+                for key in ("model_check", "not_used")
+            },
         }
 
     def table(self) -> pd.DataFrame:
