@@ -132,11 +132,13 @@ def as_text(summary: dict[str, Any]) -> list[str]:
         f"{summary['size_bytes']} bytes, sensors over {summary['duration_s']:.1f} s",
         "altitude sources:",
     ]
+    # a column as wide as its longest source (PX4's: vehicle_air_data[0].baro_alt_meter)
+    width = max([14, *(len(s["source"]) for s in summary["sensors"])])
     for s in summary["sensors"]:
         rate = f"{s['rate_hz']:.1f} Hz" if s["rate_hz"] else "? Hz"
         dropped = ", ".join(f"{n} {r}" for r, n in s["samples_dropped"].items())
         lines.append(
-            f"  {s['name']:<12} {s['source']:<14} {rate:>8} {s['samples']:>7} samples "
+            f"  {s['name']:<12} {s['source']:<{width}} {rate:>8} {s['samples']:>7} samples "
             f"{s['min_m']:9.2f} .. {s['max_m']:9.2f} m  {s['start_s']:.1f}-{s['end_s']:.1f} s  "
             f"gaps>1s {s['gaps_over_1s']} (longest {s['longest_gap_s']:.1f} s)"
             + (f"  dropped: {dropped}" if dropped else "")
