@@ -11,11 +11,11 @@ process) with a random method, in a worker process with a 30 s limit per variant
 address-space limit. The allowed outcomes are a valid output or a documented error (exit 1 or 2
 with one line on stderr and no file written). Anything else is a failure, printed with the seed
 that reproduces it, and makes the exit code 1: exit 3 (a bug), a hang, runaway memory, a second
-line on stderr (a success may print at most three warning lines: what reading left out, a
-divergence, and the smoother's failed model check), a partial output or a temporary file left
-behind, and in the CSV an infinite number, a missing fused value where the status says fused, or a
-fused value more than 100 m outside every sensor (below the lowest or above the highest) at a tick
-not flagged ``diverged``.
+line on stderr (a success may print at most four warning lines: what reading left out, the
+sensors the datum left out, a divergence, and the smoother's failed model check), a partial
+output or a temporary file left behind, and in the CSV an infinite number, a missing fused value
+where the status says fused, or a fused value more than 100 m outside every sensor (below the
+lowest or above the highest) at a tick not flagged ``diverged``.
 """
 
 from __future__ import annotations
@@ -101,7 +101,7 @@ def judge(code: int, lines: list[str], out: Path, left: list[str]) -> tuple[str,
         if left:
             return "FAIL partial output", ", ".join(left)
         return f"error {code}", last
-    if len(lines) > 3 or not all(line.startswith("altfuse: warning: ") for line in lines):
+    if len(lines) > 4 or not all(line.startswith("altfuse: warning: ") for line in lines):
         return "FAIL stderr lines", " | ".join(lines)[:200]
     if left != ["out.csv", "out.meta.json"]:
         return "FAIL stray file", ", ".join(left)
