@@ -263,6 +263,20 @@ def test_a_sensor_logged_slower_than_the_gap_is_not_cut_between_its_samples() ->
     assert stats.gaps_over_max == 1
 
 
+def test_two_samples_hours_apart_are_not_a_sensor_s_sampling() -> None:
+    """A GPS with two samples 7 hours apart (a damaged log's stamps: the long fuzz run) had a
+    sampling interval of 7 hours: its column was the spline across them, at every tick, and
+    the guard measured the fused value against it (the smoother 1815 m off, unflagged). An own
+    interval counts up to MAX_OWN_GAP_S; a GPS at 0.2 Hz is still bridged."""
+    grid = np.arange(0.0, 25300.0, 0.1)
+    out, stats = resample(np.array([81.9, 25282.0]), np.array([0.0, 0.05]), grid, 10.0, 1.0)
+    assert np.isfinite(out).sum() == 2  # each sample's own cell, nothing between
+    assert stats.gaps_over_max == 1
+    t = np.arange(0.0, 60.0, 5.0)
+    out, _ = resample(t, np.sin(t / 20), np.arange(0.0, 55.05, 0.1), 10.0, 1.0)
+    assert np.isfinite(out).all()
+
+
 def test_a_lags_standard_error_describes_its_error() -> None:
     """Over 40 noises of the same climb, the barometer 0.3 m noisy: the lag's error lies within
     2 standard errors on 85-100 % of them (white noise: the error's spread is 0.4 of the

@@ -11,7 +11,8 @@ module decides (ALGORITHMS.md section 1):
   each tick (a box filter), and the spline is fitted through the cell means: a spline through
   every raw sample would alias the noise into the decimated series.
 - The spline never bridges a gap longer than ``max_gap_s`` (or, for a sensor logged more slowly,
-  ``OWN_INTERVALS`` of its own sampling interval) and never extrapolates: ticks in a gap or
+  ``OWN_INTERVALS`` of its own sampling interval, ``MAX_OWN_GAP_S`` at most) and never
+  extrapolates: ticks in a gap or
   outside a sensor's data are NaN for that sensor, not invented.
 - The clock spans the union of the sensors' time ranges (NaN marks absence) or their overlap.
 """
@@ -109,6 +110,10 @@ def cell_means(t: FloatArray, v: FloatArray, rate_hz: float) -> tuple[FloatArray
 #: A sensor's own sampling interval times this is never a gap: a GPS logged at 1 Hz (a PX4
 #: low-rate logging profile) fell apart between every two samples at ``max_gap_s`` 1.0.
 OWN_INTERVALS = 1.5
+#: ... up to this [s]: the "interval" of a GPS with two samples 7 hours apart (a damaged log's
+#: stamps) bridged the 7 hours, a column the guard measured the fused value against: the
+#: smoother 1815 m off with its fused_std 27 km, unflagged, status single.
+MAX_OWN_GAP_S = 10.0
 
 
 def resample(
@@ -122,7 +127,8 @@ def resample(
     t, v = cell_means(t, v, rate_hz)
     out = np.full(grid.shape, np.nan)
     if t.size > 1:
-        max_gap_s = max(max_gap_s, OWN_INTERVALS * float(np.median(np.diff(t))))
+        own = OWN_INTERVALS * float(np.median(np.diff(t)))
+        max_gap_s = max(max_gap_s, min(own, MAX_OWN_GAP_S))
     breaks = np.flatnonzero(np.diff(t) > max_gap_s) + 1
     segments = np.split(np.arange(t.size), breaks)
     half_cell = 0.5 / rate_hz

@@ -62,7 +62,7 @@ class FuseOptions:
     max_gap_s: float = param(
         1.0,
         help="longest gap in a sensor's data the spline may bridge (at least 1.5 of its own "
-        "sampling interval)",
+        "sampling interval, up to 10 s)",
         unit="s",
         check="positive",
     )
