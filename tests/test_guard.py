@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -76,6 +77,13 @@ def test_a_gross_excursion_is_flagged_however_brief() -> None:
     assert one_tick.result.status[-1] == "diverged"
     below = guard(shifted(inputs, 299, 300, 0.9 * GROSS_M), inputs)
     assert below.record["diverged_ticks"] == 0
+    # however wide the method's own band: a smoother 1.8 km off with a fused_std of 27 km,
+    # hours after its last sample, passed as within 3 sigma
+    wide = shifted(inputs, 100, 200, 1.5 * GROSS_M)
+    wide = replace(wide, tick_traces={"fused_std": np.full(300, 27e3)})
+    assert guard(wide, inputs).record["diverged_ticks"] == 100
+    wide = replace(wide, fused=shifted(inputs, 100, 200, 0.9 * GROSS_M).fused)
+    assert guard(wide, inputs).record["diverged_ticks"] == 0
 
 
 def test_on_a_coarse_clock_an_estimate_is_held_to_the_sensors_at_its_tick() -> None:

@@ -11,7 +11,9 @@ f^2))``, with ``s`` the white noise of the sensor at the envelope's nearer edge 
 samples' second differences) and ``f`` the method's own ``fused_std`` where it gives one. A run
 of such ticks (through pauses shorter than ``BRIDGE_S``) lasting ``MIN_S`` or more, or with a
 tick beyond ``GROSS_M`` (a hundred metres outside every sensor is never a filter's overshoot,
-however brief: a GPS's last sample 100 m off at a log's cut), gets the status ``diverged``; so
+however brief: a GPS's last sample 100 m off at a log's cut; nor an estimate, however wide the
+method's own band: a smoother 1.8 km off with a fused_std of 27 km after hours without a
+sample), gets the status ``diverged``; so
 does a tick where a sensor is valid and the method gave no value at all (NaN: the smoother's
 state lost over a day's gap in a damaged log's stamps). The value is kept (it is what the
 method said), the status says not to trust it, the provenance counts it and the command line
@@ -95,9 +97,9 @@ def guard(result: FusionResult, inputs: FusionInput) -> Guarded:
     s = np.where(edge >= 0, noise[np.maximum(edge, 0) % noise.size], 0.0)
     f = result.tick_traces.get("fused_std", np.zeros(fused.size))
     limit = np.maximum(FLOOR_M, SIGMAS * np.sqrt(s**2 + np.nan_to_num(f) ** 2))
-    beyond = _bridged(np.nan_to_num(away) > limit, round(BRIDGE_S / inputs.dt_s))
+    gross = np.nan_to_num(away) > GROSS_M  # however wide the method's own band
+    beyond = _bridged((np.nan_to_num(away) > limit) | gross, round(BRIDGE_S / inputs.dt_s))
     long_enough = max(1, round(MIN_S / inputs.dt_s))
-    gross = np.nan_to_num(away) > GROSS_M
     spans = [(a, b) for a, b in runs(beyond) if b - a >= long_enough or gross[a:b].any()]
     lost = np.isfinite(z).any(axis=1) & ~np.isfinite(fused)
     flagged = lost.copy()
