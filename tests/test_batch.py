@@ -70,7 +70,8 @@ def test_batch_over_the_shared_logs_refuses_the_unfusable_and_exits_0(tmp_path: 
     # no progress bar when stderr is not a terminal; one line on the log that needs a look
     assert result.stderr == (
         "altfuse: warning: 1 log of the 8 fused needs a look (the summary's diverged and "
-        "model_check columns): rima48_test_cascade.BIN (model check failed)\n"
+        "model_check columns): rima48_test_cascade.BIN (diverged on 2 ticks, model check "
+        "failed)\n"
     )
     summary = pd.read_csv(out / "summary.csv", keep_default_na=False)
     assert len(summary) == 11
@@ -101,8 +102,9 @@ def test_batch_over_the_shared_logs_refuses_the_unfusable_and_exits_0(tmp_path: 
     assert int(damaged.notes) >= 1
     # its GPS 15 m off its barometer, which its GPS velocity does not follow either, and steps
     # between them in its crash: the smoother left both for 43 s, counted, before the steps
-    # were found (altfuse.steps); each row as its log's sidecar says
-    assert damaged.diverged == 0
+    # were found (altfuse.steps); now only its last 0.2 s, 17 m off both where its GPS ends (the
+    # guard's GROSS_M); each row as its log's sidecar says
+    assert damaged.diverged == 2
     for log, row in ok.iterrows():
         meta = json.loads((out / Path(str(log)).with_suffix(".meta.json")).read_text())
         assert int(row.diverged) == meta["guard"]["diverged_ticks"]
