@@ -69,8 +69,8 @@ def test_batch_over_the_shared_logs_refuses_the_unfusable_and_exits_0(tmp_path: 
     assert result.exit_code == 0, result.output
     # no progress bar when stderr is not a terminal; one line on the log that needs a look
     assert result.stderr == (
-        "altfuse: warning: 1 log of the 8 fused needs a look (the summary's diverged and "
-        "model_check columns): rima48_test_cascade.BIN (diverged on 2 ticks, model check "
+        "altfuse: warning: 1 log of the 8 fused needs a look (the summary's left_out, diverged "
+        "and model_check columns): rima48_test_cascade.BIN (diverged on 2 ticks, model check "
         "failed)\n"
     )
     summary = pd.read_csv(out / "summary.csv", keep_default_na=False)
@@ -154,8 +154,9 @@ def test_a_sensor_value_applies_to_the_logs_that_have_the_sensor(tmp_path: Path)
 
 def test_the_logs_that_need_a_look_are_named_in_one_line() -> None:
     """The end of a batch names the logs fused now that ``fuse`` would have warned of: those
-    the guard flagged and those whose model check failed, by name, three at most; not a log
-    refused, failed or skipped, nor one whose check passed or was not run (not the smoother)."""
+    with a sensor left out, those the guard flagged and those whose model check failed, by
+    name, three at most; not a log refused, failed or skipped, nor one whose check passed or
+    was not run (not the smoother)."""
     failed_check = "failed: mean squared normalised innovation gps 2.78"
     results = [
         LogResult("e.bin", "ok", diverged=12),
@@ -167,17 +168,20 @@ def test_the_logs_that_need_a_look_are_named_in_one_line() -> None:
         LogResult("g.bin", "refused", "1 usable altitude source"),
         LogResult("h.bin", "failed", "cannot read", diverged=5),
         LogResult("i.bin", "skipped"),
+        LogResult("j.bin", "ok", left_out="gps gps2", model_check="passed"),
     ]
+    said = "need a look (the summary's left_out, diverged and model_check columns): "
     assert doubted(results) == (
-        "4 logs of the 6 fused need a look (the summary's diverged and model_check columns): "
-        "b.ulg (model check failed); d.bin (diverged on 3 ticks, model check failed); "
-        "e.bin (diverged on 12 ticks); and 1 more"
+        f"5 logs of the 7 fused {said}b.ulg (model check failed); d.bin (diverged on 3 ticks, "
+        "model check failed); e.bin (diverged on 12 ticks); and 2 more"
     )
     assert doubted(results[4:]) == (
-        "1 log of the 2 fused needs a look (the summary's diverged and model_check columns): "
-        "f.bin (diverged on 1 tick)"
+        f"2 logs of the 3 fused {said}f.bin (diverged on 1 tick); j.bin (gps gps2 left out)"
     )
-    assert doubted([results[1], results[5], *results[6:]]) is None
+    assert doubted(results[4:9]) == (
+        f"1 log of the 2 fused {said.replace('need', 'needs', 1)}f.bin (diverged on 1 tick)"
+    )
+    assert doubted([results[1], results[5], *results[6:9]]) is None
 
 
 def test_values_for_sensors_logs_lack_are_said_once_per_set() -> None:

@@ -455,6 +455,11 @@ def test_a_sensor_the_datum_leaves_out_is_said_and_in_the_report(tmp_path: Path)
     assert written["sensors_dropped"] == {why.split(": ")[0]: why.split(": ", 1)[1]}
     assert written["model_check"] == {"smoother": "passed"}
     assert written["not_used"] == {"smoother": "sigma_m (--sigma): gps2"}
+    # and a batch names it at its end, as its summary's left_out column
+    batch = run("batch", log, "-o", tmp_path / "b", "--ground-window", "0.2", "-j", "1")
+    assert batch.exit_code == 0, batch.output
+    assert f"{log.name} (gps left out)" in batch.stderr
+    assert pd.read_csv(tmp_path / "b" / "summary.csv").left_out.tolist() == ["gps"]
     assert run("fuse", log, "-o", tmp_path / "p.csv").stderr == ""
 
 

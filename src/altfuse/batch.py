@@ -155,6 +155,7 @@ class LogResult:
     vehicle: str = ""
     firmware: str = ""
     sensors: str = ""
+    left_out: str = ""  # the sources with samples the datum could not refer (fuse warns)
     samples: int = 0  # ticks of the clock
     notes: int = 0  # the reader's notes on the log (damage, types not read, stuck runs)
     skipped_bytes: int = 0  # bytes not part of any decodable record
@@ -168,9 +169,10 @@ class LogResult:
     metrics: dict[str, float | None] = field(default_factory=dict)
 
     def doubts(self) -> list[str]:
-        """What puts this log's fused altitude in question, as ``fuse`` warns of it: the ticks
-        the guard flagged, the model's own check failed."""
-        found = [f"diverged on {counted(self.diverged, 'tick')}"] if self.diverged else []
+        """What puts this log's fused altitude in question, as ``fuse`` warns of it: sensors
+        left out, the ticks the guard flagged, the model's own check failed."""
+        found = [f"{self.left_out} left out"] if self.left_out else []
+        found += [f"diverged on {counted(self.diverged, 'tick')}"] if self.diverged else []
         return found + (["model check failed"] if self.model_check.startswith("failed") else [])
 
 
@@ -185,7 +187,7 @@ def doubted(results: Sequence[LogResult]) -> str | None:
     more = f"; and {len(named) - 3} more" if len(named) > 3 else ""
     return (
         f"{counted(len(named), 'log')} of the {len(fused)} fused "
-        f"{'needs' if len(named) == 1 else 'need'} a look (the summary's diverged and "
+        f"{'needs' if len(named) == 1 else 'need'} a look (the summary's left_out, diverged and "
         f"model_check columns): {'; '.join(named[:3])}{more}"
     )
 
@@ -236,6 +238,7 @@ def _described(name: str, done: FileRun, seconds: float) -> LogResult:
         vehicle=record["input"]["vehicle"],
         firmware=record["input"]["firmware"],
         sensors=" ".join(run.referred.names),
+        left_out=" ".join(run.referred.dropped),
         samples=int(run.referred.t.size),
         notes=len(record["input"]["notes"]),
         skipped_bytes=int(record["input"]["skipped_bytes"]),
