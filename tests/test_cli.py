@@ -214,6 +214,12 @@ def test_the_smallest_rate_and_ground_window_are_no_internal_error(tmp_path: Pat
         ("batch", ["-o", "--force"], "'--output': '--force' is an option, not a file name"),
         ("fuse", ["-o", "results/"], "'results/' names a folder; name the file in it"),
         ("fuse", ["-o", "{out}", "--weights", "w/"], "'w/' names a folder; name the file in it"),
+        # an empty path (-o "$OUT", OUT unset) was the current folder: batch wrote there, and
+        # fuse failed inside (exit 3)
+        ("fuse", ["-o", ""], "'--output': an empty path; name a file or folder"),
+        ("fuse", ["-o", "{out}", "--meta", ""], "'--meta': an empty path; name a file or"),
+        ("evaluate", ["--csv", " "], "'--csv': an empty path; name a file or folder"),
+        ("batch", ["-o", ""], "'--output': an empty path; name a file or folder"),
     ],
 )
 def test_an_option_given_where_a_file_name_goes_is_refused(
@@ -461,6 +467,13 @@ def test_a_sensor_the_datum_leaves_out_is_said_and_in_the_report(tmp_path: Path)
     assert f"{log.name} (gps left out)" in batch.stderr
     assert pd.read_csv(tmp_path / "b" / "summary.csv").left_out.tolist() == ["gps"]
     assert run("fuse", log, "-o", tmp_path / "p.csv").stderr == ""
+
+
+def test_an_empty_log_path_is_a_usage_error() -> None:
+    # it was the current folder: ".: a folder, not a log", exit 1
+    for command in ("fuse", "info", "evaluate", "batch"):
+        out = ["-o", "out.csv"] if command in ("fuse", "batch") else []
+        assert_one_line_error(run(command, "", *out), 2, "an empty path; name a file or folder")
 
 
 def test_info_text_and_json() -> None:

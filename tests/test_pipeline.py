@@ -153,6 +153,8 @@ def test_the_library_job_never_writes_over_its_log(tmp_path: Path) -> None:
         Outputs(tmp_path / "o.csv", meta=log),
         Outputs(tmp_path / "o.csv", weights=tmp_path / "o.csv"),
         Outputs(tmp_path / "o.json"),
+        Outputs(Path("")),  # the current folder, as "/" is: pathlib's ValueError before
+        Outputs(Path("/")),
     ):
         with pytest.raises(AltfuseError):  # ParameterError, or OutputError for the format
             fuse_to_files(log, outputs)

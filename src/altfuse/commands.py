@@ -237,7 +237,17 @@ def _once_each(name: str, pairs: tuple[tuple[str, float], ...]) -> dict[str, flo
     return out
 
 
-class _OutputPath(click.Path):
+class _GivenPath(click.Path):
+    """A path that names something: an empty one (``-o "$OUT"`` with OUT unset) was the current
+    folder, and ``batch -o ""`` wrote its outputs there; ``fuse -o ""`` failed inside."""
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        if not str(value).strip():
+            self.fail("an empty path; name a file or folder", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+class _OutputPath(_GivenPath):
     """An output's path, refused where it is an option: ``--weights --force`` wrote the weights
     to a file named ``--force`` and left the table it meant to overwrite (click takes the next
     word as the value, whatever it is). A file whose name begins with a dash: ``./-name``. A
@@ -256,7 +266,7 @@ class _OutputPath(click.Path):
 
 
 # a folder is taken: read_log says it is one, and points to batch
-_LOG_ARG = click.argument("log", type=click.Path(path_type=Path))
+_LOG_ARG = click.argument("log", type=_GivenPath(path_type=Path))
 _PATH = _OutputPath(dir_okay=False, path_type=Path)
 
 
@@ -608,7 +618,7 @@ class _Progress:
 
 
 @click.command(cls=_MethodCommand, choose="one")
-@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.argument("paths", nargs=-1, required=True, type=_GivenPath(path_type=Path))
 @click.option(
     "-o",
     "--output",

@@ -294,8 +294,9 @@ STDOUT = Path("-")
 def default_meta_path(csv_path: Path) -> Path | None:
     """``out.csv`` -> ``out.meta.json``, beside the file a link names (no
     ``/dev/stdout.meta.json``); none beside standard output or another stream
-    (:func:`is_stream`: no ``/dev/null.meta.json``)."""
-    if csv_path == STDOUT or is_stream(csv_path):
+    (:func:`is_stream`: no ``/dev/null.meta.json``), nor beside a path without a file's name
+    (``.``, ``/``: folders, refused as outputs by :func:`check_paths`; pathlib raised here)."""
+    if csv_path == STDOUT or is_stream(csv_path) or not csv_path.name:
         return None
     if os.path.islink(csv_path):
         csv_path = Path(os.path.realpath(csv_path))
