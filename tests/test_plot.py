@@ -7,7 +7,7 @@ import numpy as np
 from matplotlib.lines import Line2D
 
 from altfuse.evaluation import truth_or_none
-from altfuse.pipeline import fuse_log
+from altfuse.pipeline import FuseOptions, fuse_log
 from altfuse.plot import colour, figure, run_figure, window_shares
 from conftest import SAMPLE_LOG, shared_log
 
@@ -76,6 +76,22 @@ def test_a_runaway_curve_does_not_flatten_the_others() -> None:
     assert notes == ["fused: smoother: 32000.0 m off the axis"]
     band = fig.axes[2].collections
     assert band  # the +-2 sigma band under the residuals
+
+
+def test_the_ticks_the_guard_flagged_are_crossed_on_the_fused_curve() -> None:
+    """The CSV's status ``diverged``, seen: the 3.3 plane's multilayer, 263 ticks in 8 spans
+    (the figure showed nothing of them)."""
+    run = fuse_log(shared_log("truth/plane_3.3.0a1_gitterbadger_autotest_climb386m_imunoise.BIN"),
+                   FuseOptions(method="multilayer"))  # fmt: skip
+    flagged = run.result.status == "diverged"
+    assert flagged.sum() == 263
+    fig = run_figure(run, {}, None, "plane")
+    crosses = _lines(fig.axes[1])["diverged: multilayer outside every sensor (263 ticks)"]
+    np.testing.assert_array_equal(crosses.get_xdata(), run.referred.t[flagged])
+    assert crosses.get_marker() == "x"
+    quiet = fuse_log(SAMPLE_LOG)
+    labels = _lines(run_figure(quiet, {}, None, "sample").axes[1])
+    assert not [label for label in labels if label.startswith("diverged")]
 
 
 def test_the_weights_are_shown_as_shares_over_a_window() -> None:

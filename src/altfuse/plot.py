@@ -12,7 +12,8 @@ Lines break where the data stops; a stretch of more than ``LONG_GAP_S`` (and a t
 flight) with no sensor at all is shortened on the time axis to ``SHORT_GAP_SHARE`` of its width
 and marked, so that the flight is not squeezed into a corner by a pause in the log. The heights'
 axes span the sensors' range: a fused value beyond it is drawn at the edge, marked, and its
-farthest excursion written there (a finding, as :mod:`altfuse.guard` flags it).
+farthest excursion written there (a finding, as :mod:`altfuse.guard` flags it). The ticks the
+guard flagged ``diverged`` are crossed on the fused curve: the status the CSV gives them, seen.
 
 The format follows the file's extension (PNG or SVG). Figures are made with matplotlib's object
 API, without pyplot: no backend, window or global state. matplotlib is imported on the first
@@ -28,8 +29,9 @@ from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
+from altfuse.fuse.base import DIVERGED
 from altfuse.metrics import samples_in
-from altfuse.model import FloatArray
+from altfuse.model import FloatArray, counted
 from altfuse.params import InvalidParameter
 
 if TYPE_CHECKING:
@@ -97,9 +99,11 @@ def figure(  # noqa: PLR0913 (keyword-only: each panel's data, by name)
     sigma: FloatArray | None = None,
     truth: FloatArray | None = None,
     truth_label: str = "truth",
+    diverged: np.ndarray | None = None,
 ) -> Figure:
     """The four panels as a matplotlib figure (see :func:`writer` to save it). ``sigma`` is the
-    standard deviation of ``fused[weights_of]`` (the residuals are against that curve)."""
+    standard deviation of ``fused[weights_of]`` (the residuals are against that curve);
+    ``diverged`` the ticks where the guard flagged it."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(13, 11), layout="constrained")
@@ -116,6 +120,10 @@ def figure(  # noqa: PLR0913 (keyword-only: each panel's data, by name)
         ax_weights.plot(t, shares[:, i], lw=0.9, color=c, label=name)
     for method, values in fused.items():
         _clipped(ax_fused, t, values, (low, high), f"fused: {method}", colour(method))
+    if diverged is not None and diverged.any():
+        ax_fused.plot(t[diverged], np.clip(main[diverged], low, high), "kx", ms=5,
+                      label=f"diverged: {weights_of} outside every sensor "
+                      f"({counted(int(diverged.sum()), 'tick')})")  # fmt: skip
     if truth is not None:
         ax_fused.plot(t, truth, "k--", lw=1.0, label=truth_label)
     if sigma is not None and np.isfinite(sigma).any():
@@ -274,6 +282,7 @@ def run_figure(
         sigma=run.result.tick_traces.get("fused_std"),
         truth=None if truth is None else truth.h,
         truth_label="truth" if truth is None else truth.label,
+        diverged=run.result.status == DIVERGED,
     )
 
 
