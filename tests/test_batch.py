@@ -651,6 +651,21 @@ def test_the_shards_of_a_job_array_cover_every_log_once(tmp_path: Path) -> None:
     assert [r.log for r in first] == one.log.tolist() == ["a.bin", "c.bin", "e.bin"]
     assert two.log.tolist() == ["b.bin", "d.bin"]
     assert not (out / "summary.csv").exists()
+    # the README's commands combine them: every log once, as one batch of them all writes
+    readme = (ROOT / "README.md").read_text()
+    block = readme[readme.index("The shards' summaries and indexes combine") :]
+    start = block.index("```bash\n") + len("```bash\n")
+    block = block[start : block.index("\n```", start)]
+    assert len(block.splitlines()) == 2
+    for line in block.splitlines():
+        code = line.removeprefix('python -c "').removesuffix('"').replace("results/", "out/")
+        subprocess.run([sys.executable, "-c", code], cwd=tmp_path, check=True)
+    whole = tmp_path / "whole"
+    run_batch([logs], whole, jobs=1)
+    combined = pd.read_csv(out / "summary.csv")
+    assert combined.log.tolist() == ["a.bin", "b.bin", "c.bin", "d.bin", "e.bin"]
+    together = json.loads((out / "index.json").read_text())
+    assert together["logs"] == json.loads((whole / "index.json").read_text())["logs"]
     bad = CliRunner().invoke(cli, ["batch", str(logs), "-o", str(out), "--shard", "3/2"])
     assert bad.exit_code == 2
     assert "'3/2' is not I/N with 1 <= I <= N" in bad.output
