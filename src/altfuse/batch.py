@@ -176,19 +176,23 @@ class LogResult:
         return found + (["model check failed"] if self.model_check.startswith("failed") else [])
 
 
+def _fused_now(results: Sequence[LogResult]) -> list[LogResult]:
+    """The logs fused by this run, by name (a log skipped now was said by the run that fused
+    it)."""
+    return sorted((r for r in results if r.status == "ok"), key=lambda r: r.log)
+
+
 def doubted(results: Sequence[LogResult]) -> str | None:
     """One line naming the logs fused now whose outputs need a look (:meth:`LogResult.doubts`),
-    the first three with why, for the end of a batch; None where there are none. A log skipped
-    now was named by the run that fused it."""
-    fused = sorted((r for r in results if r.status == "ok"), key=lambda r: r.log)
+    the first three with why, for the end of a batch; None where there are none."""
+    fused = _fused_now(results)
     named = [f"{r.log} ({', '.join(why)})" for r in fused if (why := r.doubts())]
     if not named:
         return None
-    more = f"; and {len(named) - 3} more" if len(named) > 3 else ""
     return (
         f"{counted(len(named), 'log')} of the {len(fused)} fused "
         f"{'needs' if len(named) == 1 else 'need'} a look (the summary's left_out, diverged and "
-        f"model_check columns): {'; '.join(named[:3])}{more}"
+        f"model_check columns): {_first_three(named, '; ', '; ')}"
     )
 
 
@@ -197,17 +201,14 @@ def unused(results: Sequence[LogResult]) -> list[str]:
     they lack the sensors (:func:`altfuse.fuse.smoother.not_used`), the set the most logs share
     first: how many logs, the first three by name. One option for a fleet fits some logs; the
     others are said once, not once per log."""
-    fused = sorted((r for r in results if r.status == "ok"), key=lambda r: r.log)
+    fused = _fused_now(results)
     sets = {r.not_used for r in fused} - {""}
     by_values = {v: [r.log for r in fused if r.not_used == v] for v in sets}
-    lines = []
-    for values, logs in sorted(by_values.items(), key=lambda item: (-len(item[1]), item[0])):
-        more = f" and {len(logs) - 3} more" if len(logs) > 3 else ""
-        lines.append(
-            f"not used in {counted(len(logs), 'log')} of the {len(fused)} fused, for want of the "
-            f"sensors (the summary's not_used column): {values} ({', '.join(logs[:3])}{more})"
-        )
-    return lines
+    return [
+        f"not used in {counted(len(logs), 'log')} of the {len(fused)} fused, for want of the "
+        f"sensors (the summary's not_used column): {values} ({_first_three(logs)})"
+        for values, logs in sorted(by_values.items(), key=lambda item: (-len(item[1]), item[0]))
+    ]
 
 
 def _described(name: str, done: FileRun, seconds: float) -> LogResult:
@@ -819,8 +820,13 @@ def _refuse_rerun(jobs: Sequence[Job], options: BatchOptions, out: Path) -> None
 
 def _named(jobs: Sequence[Job]) -> str:
     """The first three of ``jobs``' logs, and how many more."""
-    named = ", ".join(printable(str(job.relative)) for job in jobs[:3])
-    return named + (f" and {len(jobs) - 3} more" if len(jobs) > 3 else "")
+    return _first_three([printable(str(job.relative)) for job in jobs])
+
+
+def _first_three(names: Sequence[str], sep: str = ", ", more_sep: str = " ") -> str:
+    """The first three ``names`` joined by ``sep``, and how many more (after ``more_sep``)."""
+    more = f"{more_sep}and {len(names) - 3} more" if len(names) > 3 else ""
+    return sep.join(names[:3]) + more
 
 
 def summary_name(shard: tuple[int, int] | None = None, name: str = SUMMARY) -> str:

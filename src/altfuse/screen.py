@@ -73,6 +73,7 @@ REASONS = (
 #: dropped and counted per source, and no implausible sample (every simulated log warned of
 #: some).
 OUT_OF_RANGE = (CODE, PINNED, BELOW_MINIMUM)
+IMPLAUSIBLE = tuple(r for r in REASONS if r not in OUT_OF_RANGE)
 
 #: The largest specific force an autopilot's IMU reports [m/s^2]: +-16 g is the common range,
 #: +-40 g the largest ArduPilot drives (ADIS16470); beyond 50 g a sample is corrupt.
@@ -444,7 +445,8 @@ def implausible_count(flight: FlightLog) -> dict[str, int]:
     """Samples dropped by screening as implausible, per altitude source (the reader's own
     filters and a rangefinder beyond its range, ``OUT_OF_RANGE``, excluded) and per other input
     (``IMU[0].Acc``, ``ATT``, ...)."""
-    faults = set(REASONS) - set(OUT_OF_RANGE)
-    counts = {s.name: sum(n for r, n in s.dropped.items() if r in faults) for s in flight.sensors}
+    counts = {
+        s.name: sum(n for r, n in s.dropped.items() if r in IMPLAUSIBLE) for s in flight.sensors
+    }
     counts.update(flight.dropped_inputs)
     return {name: n for name, n in counts.items() if n}

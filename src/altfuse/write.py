@@ -69,7 +69,7 @@ def check_table_path(path: Path, parquet: bool = True) -> None:
     compression's, names another format (:data:`OTHER_FORMATS`; ``.parquet`` too where the
     table is written as CSV alone, ``parquet`` False): it was written as CSV."""
     suffix = _format_suffix(path)
-    if suffix.lower() in OTHER_FORMATS or (suffix.lower() == ".parquet" and not parquet):
+    if (named := suffix.lower()) in OTHER_FORMATS or (named == ".parquet" and not parquet):
         formats = "as CSV, or as Parquet for a .parquet name" if parquet else "as CSV"
         raise ParameterError(
             f"{path}: this table is written {formats}, not as {suffix}: "

@@ -375,6 +375,10 @@ TIMING_SIGMA_S = 0.005
 REFUSED_VARIANCE = 1e30
 
 
+#: The fields of :class:`SmootherParams` that hold a value per sensor, by its name.
+PER_SENSOR = ("sigma_m", "offset_noise_m2_s")
+
+
 @dataclass(frozen=True, kw_only=True)
 class SmootherParams(Params):
     """What the smoother takes from the user; everything else it learns from the log."""
@@ -426,7 +430,7 @@ class SmootherParams(Params):
         whether or not a log has it: ``lidar`` never fuses, ``rangefinder`` where a log has one
         (a batch's logs differ)."""
         super().__post_init__()
-        for name in ("sigma_m", "offset_noise_m2_s"):
+        for name in PER_SENSOR:
             if bad := sorted(k for k in getattr(self, name) if not SENSOR_NAME.match(k)):
                 raise InvalidParameter(
                     name,
@@ -859,6 +863,6 @@ def not_used(params: SmootherParams, names: Sequence[str]) -> str:
     where every value was used. They were an error, which failed every log of a batch without
     the sensor (``--sigma rangefinder=0.05`` over a fleet's logs: 5 of 8 failed); the metadata
     records them, and the commands say so with the log's name."""
-    per_sensor = [f for f in fields(SmootherParams) if f.name in ("sigma_m", "offset_noise_m2_s")]
+    per_sensor = [f for f in fields(SmootherParams) if f.name in PER_SENSOR]
     unused = {f: sorted(set(getattr(params, f.name)) - set(names)) for f in per_sensor}
     return "; ".join(f"{f.name} ({flag_of(f)}): {', '.join(u)}" for f, u in unused.items() if u)
