@@ -391,13 +391,24 @@ def test_more_sensors_asked_than_a_log_has_is_one_line(tmp_path: Path) -> None:
 
 
 def test_skipped_bytes_are_one_warning_line(tmp_path: Path) -> None:
-    result = run("fuse", shared_log("ardupilot/rima48_test_cascade.BIN"), "-o", tmp_path / "o.csv")
+    data = SAMPLE_LOG.read_bytes()
+    damaged = tmp_path / "damaged.bin"
+    damaged.write_bytes(data[: len(data) // 2] + bytes(1000) + data[len(data) // 2 :])
+    result = run("fuse", damaged, "-o", tmp_path / "o.csv")
     assert result.exit_code == 0
     skipped = [line for line in result.stderr.splitlines() if "skipped" in line]
     assert skipped == [
-        "altfuse: warning: rima48_test_cascade.BIN: 50723 bytes skipped (not part of any "
-        "decodable record)"
+        "altfuse: warning: damaged.bin: 1000 bytes skipped (not part of any decodable record)"
     ]
+
+
+def test_erased_flash_at_a_log_s_end_is_no_warning(tmp_path: Path) -> None:
+    """rima48 was read off a flash chip: 50 KB of erased flash after its last record warned as
+    skipped bytes, as it would on every log of ArduPilot's block logger."""
+    result = run("fuse", shared_log("ardupilot/rima48_test_cascade.BIN"), "-o", tmp_path / "o.csv")
+    assert result.exit_code == 0
+    assert "skipped" not in result.stderr
+    assert "bytes" not in result.stderr
 
 
 def test_a_failed_model_check_is_one_warning_line(tmp_path: Path) -> None:

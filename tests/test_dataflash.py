@@ -175,8 +175,12 @@ def test_reading_a_damaged_log_prints_nothing(capfd: pytest.CaptureFixture[str])
     out, err = capfd.readouterr()
     assert out == ""
     assert err == ""
-    # the ~50 KB of 0xFF padding at the end is counted, not printed
-    assert flight.skipped_bytes == 50723
+    # read off a flash chip: ~50 KB of erased flash after its last record, not damage
+    assert flight.skipped_bytes == 0
+    assert flight.notes[-1] == (
+        "the log ends in 50723 bytes of erased flash (0xFF) after its last record: read off a "
+        "flash chip"
+    )
 
 
 @pytest.mark.parametrize(
@@ -187,15 +191,20 @@ def test_reading_a_damaged_log_prints_nothing(capfd: pytest.CaptureFixture[str])
         (b"\xa3\x95\x80" + bytes(40), 0, "the log ends inside its last record (FMT, 43 of its 89"),
         (b"\x00", 1, "1 byte not part of any decodable record"),
         (b"\xa3\x00\xa3", 3, "3 bytes not part of any decodable record"),
+        (b"\xff" * 4096, 0, "the log ends in 4096 bytes of erased flash (0xFF) after its last"),
+        (b"\xff" * 4095 + b"\x00", 4096, "4096 bytes not part of any decodable record"),
+        (b"\xa3\x95\x80" + b"\xff" * 100, 0, "the log ends in 14 bytes of erased flash (0xFF)"),
     ],
-    ids=["header-1", "header-2", "record", "zero", "no-record"],
+    ids=["header-1", "header-2", "record", "zero", "no-record", "erased", "not-erased", "cut"],
 )
 def test_a_log_that_ends_inside_a_record_has_no_skipped_bytes(
     tmp_path: Path, tail: bytes, skipped: int, note: str
 ) -> None:
     """Nearly every real log ends inside a record, where the autopilot stopped writing (15 of
     the 20 shared ArduPilot logs, 4-40 bytes): a note, not skipped bytes, which warned on each.
-    Bytes that begin no record are still skipped."""
+    So is a log read off a flash chip, which ends in erased flash (0xFF), its last record filled
+    by it where writing stopped mid-record (a record to pymavlink, and so here). Bytes that
+    begin no record are still skipped."""
     path = tmp_path / "cut.bin"
     path.write_bytes(SAMPLE_LOG.read_bytes() + tail)
     flight = read_log(path)

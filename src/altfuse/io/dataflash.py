@@ -794,6 +794,30 @@ def _firmware(rec: _Records) -> tuple[str, str]:
     return "unknown", "unknown"
 
 
+def _skipped(index: Index, notes: list[str]) -> int:
+    """The bytes of ``index``'s file in no record, less those where its writing stopped: the
+    record it ends inside (the end of nearly every log) or erased flash after its last record
+    (a log read off a flash chip), each said in ``notes``."""
+    cut = erased = 0
+    if index.cut_at is not None:
+        cut = index.size - index.cut_at
+        what = f"{counted(cut, 'byte')} of its header"
+        if cut >= HEADER:
+            cut_type = index.formats[int(index.data[index.cut_at + 2])]
+            what = f"{cut_type.name}, {cut} of its {cut_type.length} bytes"
+        notes.append(f"the log ends inside its last record ({what}): read up to the one before")
+    elif index.erased_at is not None:
+        erased = index.size - index.erased_at
+        notes.append(
+            f"the log ends in {counted(erased, 'byte')} of erased flash (0xFF) after its last "
+            "record: read off a flash chip"
+        )
+    skipped = index.size - index.decoded_bytes - cut - erased
+    if skipped:
+        notes.append(f"{counted(skipped, 'byte')} not part of any decodable record")
+    return skipped
+
+
 def read_dataflash(path: str | Path) -> FlightLog:
     """Read the altitude sources, IMU, attitude and references from a DataFlash log.
 
@@ -840,18 +864,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     course = _read_gps_field(rec, "GCrs", b.not_converged)
     climb = _read_gps_field(rec, "VZ", b.not_converged, sign=-1.0)
     rec.done("GPS", "GPS2", "GPS3")
-    index = rec.index
-    cut = 0
-    if index.cut_at is not None:  # the end of nearly every log: its writing stopped mid-record
-        cut = index.size - index.cut_at
-        what = f"{counted(cut, 'byte')} of its header"
-        if cut >= HEADER:
-            cut_type = index.formats[int(index.data[index.cut_at + 2])]
-            what = f"{cut_type.name}, {cut} of its {cut_type.length} bytes"
-        b.notes.append(f"the log ends inside its last record ({what}): read up to the one before")
-    skipped = index.size - index.decoded_bytes - cut
-    if skipped:
-        b.notes.append(f"{counted(skipped, 'byte')} not part of any decodable record")
+    skipped = _skipped(rec.index, b.notes)
     for what, problem in rec.problems.items():  # after every read: reading finds some
         b.notes.append(f"{what}: not read: {problem}")
         if what.split(".")[0] in _SENSOR_TYPES:

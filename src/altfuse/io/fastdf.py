@@ -22,7 +22,10 @@ What this module changes is the *how*: instead of one Python object per record, 
 
 Like pymavlink's parser, the walk stops at the first record that the file ends inside (where
 every log ends that the autopilot stopped writing mid-record: ``Index.cut_at``), and a type is
-known only from its FMT record on. The other bytes not in any record are the skipped bytes.
+known only from its FMT record on. A log read off a flash chip (ArduPilot's block logger) ends
+in erased flash, 0xFF to the end of the file: where it begins after the last record is
+``Index.erased_at`` (a record it cut short is one to pymavlink, and so here). The other bytes
+not in any record are the skipped bytes.
 
 A FMT record that cannot describe its records truthfully keeps its length (the walk steps over
 its records as pymavlink's does) but gets a ``problem``, and the reader decodes none of its
@@ -60,6 +63,8 @@ from altfuse.io.framing import (
 )
 
 HEAD1, HEAD2 = SYNC
+#: What erased flash reads: the end of a log read off a flash chip, where writing stopped.
+ERASED = 0xFF
 _CHUNK = 1 << 24  # the file searched and walked in 16 MiB chunks: bounded temporaries
 _BATCH = 1 << 20  # records found per call of the walk
 
@@ -116,8 +121,9 @@ class Format:
 
 @dataclass
 class Index:
-    """Where the records are: offsets and type ids of the chain, the formats, and where the
-    record the file ends inside begins (None where it ends between records)."""
+    """Where the records are: offsets and type ids of the chain, the formats, where the record
+    the file ends inside begins (None where it ends between records), and where erased flash
+    after the last record begins (None where there is none)."""
 
     data: npt.NDArray[np.uint8]
     offsets: npt.NDArray[np.integer[Any]]
@@ -126,6 +132,7 @@ class Index:
     size: int
     mapped: mmap.mmap | None = field(default=None, repr=False)  # the mapping ``data`` views
     cut_at: int | None = None
+    erased_at: int | None = None
 
     @cached_property
     def per_type(self) -> npt.NDArray[np.int64]:
@@ -367,6 +374,12 @@ def exit_on_sigbus() -> None:
     _installed.append(handler)
 
 
+def _erased(data: npt.NDArray[np.uint8], start: int) -> bool:
+    """Whether every byte from ``start`` to the end is erased flash, compared a chunk at a time
+    (a sparse file's hole of zeros is given up after its first chunk, not compared whole)."""
+    return all((data[a : a + _CHUNK] == ERASED).all() for a in range(start, data.size, _CHUNK))
+
+
 def index_file(path: str | Path) -> Index:
     """Map ``path`` read-only and find its records as pymavlink's sequential parser would."""
     exit_on_sigbus()
@@ -390,8 +403,11 @@ def index_file(path: str | Path) -> Index:
         if chained == (formats, first):
             break
         formats, first = chained
+    erased_at = None
     if cut_at is None and offsets.size:  # the file may end inside the header of a record too
         tail = int(offsets[-1]) + formats[int(types[-1])].length
         if 0 < size - tail < HEADER and bytes(data[tail:]) == SYNC[: size - tail]:
             cut_at = tail
-    return Index(data, offsets, types, formats, size, mapped, cut_at)
+        elif size > tail and _erased(data, tail):
+            erased_at = tail
+    return Index(data, offsets, types, formats, size, mapped, cut_at, erased_at)
