@@ -178,6 +178,12 @@ def _log(*sensors: Series, params: dict[str, float] | None = None) -> FlightLog:
     )
 
 
+def test_one_implausible_sample_is_one() -> None:
+    t = np.arange(0.0, 10.0, 0.1)
+    baro = replace(series("baro", t, np.sin(t)), dropped={SPIKE: 1})
+    assert damage(_log(baro)) == "test.bin: 1 implausible sample dropped (baro 1)"
+
+
 def test_a_sensor_stuck_while_the_others_move_is_dropped_and_counted() -> None:
     t = np.arange(0.0, 60.0, 0.2)
     climb = np.interp(t, [0, 20, 40, 60], [0, 0, 15, 15])

@@ -55,7 +55,7 @@ def damage(flight: FlightLog) -> str | None:
     implausible = implausible_count(flight)
     if implausible:
         per = ", ".join(f"{name} {n}" for name, n in implausible.items())
-        parts.append(f"{sum(implausible.values())} implausible samples dropped ({per})")
+        parts.append(f"{counted(sum(implausible.values()), 'implausible sample')} dropped ({per})")
     gone = screened_out(flight)
     if gone:
         parts.append(f"{', '.join(gone)} left out: no plausible sample")
