@@ -14,8 +14,8 @@ that reproduces it, and makes the exit code 1: exit 3 (a bug), a hang, runaway m
 line on stderr (a success may print at most four warning lines: what reading left out, the
 sensors the datum left out, a divergence, and the smoother's failed model check), a partial
 output or a temporary file left behind, and in the CSV an infinite number, a missing fused value
-where the status says fused, or a fused value more than 100 m outside every sensor (below the
-lowest or above the highest) at a tick not flagged ``diverged``.
+where the status says fused, or a fused value more than the guard's ``GROSS_M`` (10 m) outside
+every sensor (below the lowest or above the highest) at a tick not flagged ``diverged``.
 """
 
 from __future__ import annotations
@@ -38,13 +38,13 @@ import pandas as pd
 from click.testing import CliRunner
 
 from altfuse.cli import cli
+from altfuse.guard import GROSS_M
 from fuzzing import MUTATIONS, ULOG_MUTATIONS, Records, variant
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT_S = 30
 MEMORY_BYTES = 4 << 30
 METHODS = ("smoother", "support", "mean", "delay2", "multilayer")
-EXCURSION_M = 100.0
 _BASES: dict[str, tuple[bytes, Records | None]] = {}
 
 
@@ -123,7 +123,7 @@ def check_csv(table: pd.DataFrame) -> tuple[str, str]:
     low = np.min(np.where(np.isfinite(sensors), sensors, np.inf), axis=1)
     high = np.max(np.where(np.isfinite(sensors), sensors, -np.inf), axis=1)
     outside = np.where(seen, np.maximum(low - fused, fused - high), np.nan)  # beyond every one
-    away = (outside > EXCURSION_M) & (status != "diverged")
+    away = (outside > GROSS_M) & (status != "diverged")
     if away.any():
         worst = float(np.max(outside[away]))
         return "FAIL unflagged excursion", f"{int(away.sum())} ticks, up to {worst:.0f} m"
