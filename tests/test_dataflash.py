@@ -7,6 +7,7 @@ import gzip
 import hashlib
 import importlib
 import io
+import itertools
 import lzma
 import os
 import pty
@@ -28,7 +29,7 @@ from altfuse.io import read_log
 from altfuse.io.dataflash import RESET_MAX, _Records, rejoined
 from altfuse.io.dataflash_writer import DataFlashWriter
 from altfuse.io.fastdf import index_file
-from altfuse.model import Series
+from altfuse.model import FEW_IN_A_ROW, Samples, Series, usable_series
 from altfuse.screen import GPS_CONVERGED_VACC_M, NOT_CONVERGED, not_converged
 from altfuse.simulate import simulate_flight, write_simulated_log
 from conftest import SAMPLE_LOG, shared_log
@@ -106,7 +107,14 @@ def test_simulated_log_reads_back_what_was_written(tmp_path: Path) -> None:
     flight = read_log(path)
     sources = {s.name: s for s in flight.sensors}
     rfnd = sim.records["RFND"]
-    good = [(t, v[1]) for t, v in rfnd if v[2] == 4]
+    runs = [list(run) for _, run in itertools.groupby(rfnd, key=lambda r: r[1][2] == 4)]
+    # Good (Stat 4), in runs of three or more but for the log's first and last
+    good = [
+        (t, v[1])
+        for i, run in enumerate(runs)
+        if run[0][1][2] == 4 and (len(run) >= 3 or i in (0, len(runs) - 1))
+        for t, v in run
+    ]
     # RFND.Dist is an int16 in centimetres with FMTU multiplier B: the reader gives metres
     np.testing.assert_allclose(sources["rangefinder"].value, [v / 100 for _, v in good], rtol=1e-12)
     # GPS.Alt is 'e' (int32 centimetres): written and read back to the centimetre
@@ -213,6 +221,22 @@ def test_a_log_that_ends_inside_a_record_has_no_skipped_bytes(
     assert [s.value.size for s in flight.sensors] == [
         s.value.size for s in read_log(SAMPLE_LOG).sensors
     ]
+
+
+def test_a_rangefinder_s_valid_readings_count_in_runs_of_three() -> None:
+    bad = np.array([0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 0, 1, 0], dtype=bool)
+    t = np.arange(bad.size) * 0.1
+    samples = Samples(t, 1.0 + t)
+    invalid = {"Stat != 4 (not Good)": bad}
+    rangefinder = usable_series("rangefinder", "rangefinder", "RFND.Dist", "", samples, invalid)
+    assert isinstance(rangefinder, Series)
+    # a lone valid reading and a pair go; a run of three stays, and so do the runs the log
+    # begins and ends with (they may go on beyond it)
+    np.testing.assert_array_equal(rangefinder.t, t[[0, 1, 8, 9, 10, 12]])
+    assert rangefinder.dropped == {"Stat != 4 (not Good)": 4, FEW_IN_A_ROW: 3}
+    baro = usable_series("baro", "baro", "BARO.Alt", "", samples, invalid)
+    assert isinstance(baro, Series)
+    assert baro.t.size == 9
 
 
 def test_a_real_log_s_last_record_cut_is_a_note() -> None:

@@ -16,7 +16,7 @@ from altfuse.cli import cli
 from altfuse.errors import NoUsableSensorsError
 from altfuse.evaluation import evaluate
 from altfuse.info import damage
-from altfuse.model import FlightLog, Series
+from altfuse.model import FEW_IN_A_ROW, FlightLog, Series
 from altfuse.pipeline import FuseOptions, fuse_log
 from altfuse.screen import (
     BACKWARDS,
@@ -51,6 +51,21 @@ def test_each_check_drops_and_counts() -> None:
     assert out.dropped == {BACKWARDS: 1, OUTSIDE_LOG: 1, ENVELOPE: 1, SPIKE: 1}
     assert out.t.size == 96
     assert np.all(np.diff(out.t) > 0)
+
+
+def test_a_lone_sample_in_order_is_kept_however_far_from_its_neighbours() -> None:
+    """A rangefinder out of range on the ground but for one reading 3 s before its run (the
+    simulator's ``rangefinder-low``): in order, so no stamp out of order, where it was dropped
+    as one and warned as implausible. The same stamp out of order among them still is."""
+    t = np.concatenate(([34.55, 35.3], 38.35 + 0.05 * np.arange(100)))
+    v = np.random.default_rng(0).normal(0.3, 0.01, t.size)
+    kept = screen_series(series("rangefinder", t, v), log_span((series("rangefinder", t, v),)))
+    assert kept.dropped == {}
+    assert kept.t.size == t.size
+    t[1] = 40.012  # ahead of the three after it
+    out = screen_series(series("rangefinder", t, v), log_span((series("rangefinder", t, v),)))
+    assert out.dropped == {BACKWARDS: 1}
+    assert 40.012 not in out.t
 
 
 def test_rangefinder_codes_and_pinned_maximum() -> None:
@@ -326,6 +341,23 @@ def test_an_accelerometer_saturated_everywhere_is_no_accelerometer(tmp_path: Pat
     assert np.isfinite(table["fused_alt_m"]).all()
     assert str(meta["parameters"]["model"]).startswith("altitude-only")  # type: ignore[index]
     assert f"IMU[0].Acc {len(records['IMU'])}" in stderr
+
+
+@pytest.mark.parametrize("scenario", ["paper-a", "hover", "climb"])
+def test_a_rangefinder_out_of_range_on_the_ground_warns_nothing(
+    tmp_path: Path, scenario: str
+) -> None:
+    """Mounted below its minimum range (``rangefinder-low``), a rangefinder's noise on the ground
+    gives lone valid readings among its OutOfRangeLow: in order, so no stamp out of order, and
+    in runs shorter than three, so none it trusts. Each of these flights warned of 1-2
+    implausible samples ("time out of order")."""
+    sim = simulate_flight(scenario, seed=7, faults=("rangefinder-low",))
+    _, meta, stderr = _fused_with(sim, tmp_path / "low.bin", "smoother")
+    assert stderr == ""
+    used = meta["sensors_used"]
+    dropped = next(s["samples_dropped"] for s in used if s["name"] == "rangefinder")  # type: ignore[index]
+    assert BACKWARDS not in dropped
+    assert dropped[FEW_IN_A_ROW] > 0
 
 
 def _shifted(sim: SimulatedFlight, after_share: float, by_s: float) -> SimulatedFlight:
