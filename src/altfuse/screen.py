@@ -177,19 +177,12 @@ def log_span(series: tuple[Series, ...]) -> tuple[float, float] | None:
 
 
 def _out_of_order(t: FloatArray) -> Mask:
-    """Lone stamps far from their neighbours' and out of order among them, then samples
-    earlier than one logged before. A stamp in order among its neighbours is none, however far
-    from them: a rangefinder's lone valid reading between its runs out of range on the ground
-    (3 s before the next, the median's) was dropped as out of order, and warned as implausible."""
+    """Lone stamps far from their neighbours', then samples earlier than one logged before."""
     out = np.zeros(t.size, dtype=bool)
     if t.size >= 5:
         step = float(np.median(np.abs(np.diff(t))))
         local = running_median(t, 5)
-        in_order = np.ones(t.size, dtype=bool)
-        for k in (1, 2):  # the median's window: two each side
-            in_order[k:] &= t[k:] >= t[:-k]
-            in_order[:-k] &= t[:-k] <= t[k:]
-        out = (np.abs(t - local) > max(1.0, 10.0 * step)) & ~in_order
+        out = np.abs(t - local) > max(1.0, 10.0 * step)
     kept = np.flatnonzero(~out)
     earlier = np.maximum.accumulate(np.concatenate(([-np.inf], t[kept][:-1])))
     out[kept[t[kept] < earlier]] = True
