@@ -178,6 +178,23 @@ def test_rangefinder_tilt_correction() -> None:
     assert "not tilt-corrected" in tilt_correct(rfnd, None).datum
 
 
+def test_a_rangefinder_tilted_beyond_45_degrees_measures_no_height() -> None:
+    """PX4's EKF2 uses no rangefinder tilted more than 45 degrees; there a small error of the
+    attitude is a large one of ``d cos(tilt)``."""
+    from altfuse.datum import MAX_TILT_DEG, TILTED, tilt_correct
+    from altfuse.model import Attitude, Series
+
+    t = np.linspace(0.0, 9.0, 10)
+    rfnd = Series("rangefinder", "rangefinder", "RFND.Dist", "ground", t, np.full(10, 10.0))
+    roll = np.radians(np.linspace(0.0, 90.0, 10))  # 10 degrees a second
+    att = Attitude("ATT", t, roll, np.zeros(10), np.zeros(10))
+    out = tilt_correct(rfnd, att)
+    assert MAX_TILT_DEG == 45.0
+    np.testing.assert_array_equal(out.t, t[:5])  # 0-40 degrees; 50-90 go
+    np.testing.assert_allclose(out.value, 10.0 * np.cos(roll[:5]), rtol=1e-12)
+    assert out.dropped == {TILTED: 5}
+
+
 def test_every_offset_is_measured_at_the_reference_s_instants() -> None:
     """A vehicle creeping up at 8 cm/s before take-off, its barometer (the reference) silent
     for 6 s of the ground window: the GPS's median over all its ticks there was 0.148 m from
