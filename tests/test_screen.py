@@ -16,7 +16,7 @@ from altfuse.cli import cli
 from altfuse.errors import NoUsableSensorsError
 from altfuse.evaluation import evaluate
 from altfuse.info import damage
-from altfuse.model import FEW_IN_A_ROW, FlightLog, Series
+from altfuse.model import FEW_IN_A_ROW, Attitude, FlightLog, Series
 from altfuse.pipeline import FuseOptions, fuse_log
 from altfuse.screen import (
     BACKWARDS,
@@ -62,6 +62,28 @@ def test_a_lone_stamp_past_the_end_of_its_series_is_out_of_order() -> None:
     out = screen_series(series("gps", t, v), log_span((series("gps", t, v),)))
     assert out.dropped == {BACKWARDS: 1}
     assert out.t[-1] < 100.0
+
+
+def test_a_rangefinder_s_spikes_are_judged_as_heights() -> None:
+    """A copter at 15 m rolls to 36 degrees for one 20 Hz sample: its rangefinder's slant
+    distance goes 15 -> 18.5 -> 15 m, a spike of distance (10 g could not take it there and
+    back) and none of height. The simulated roll-flips warned of it as implausible."""
+    t = np.arange(0.0, 10.0, 0.05)
+    rng = np.random.default_rng(1)
+    height = 15.0 + rng.normal(0.0, 0.01, t.size)
+    roll = np.zeros(t.size)
+    roll[100] = np.radians(36.0)
+    attitude = Attitude("ATT", t, roll, np.zeros(t.size), np.zeros(t.size))
+    rangefinder = Series("rangefinder", "rangefinder", "RFND.Dist", "ground", t, height)
+    banked = replace(rangefinder, value=height / np.cos(roll))
+    flight = screen(replace(_log(banked), attitude=attitude))
+    assert flight.sensors[0].dropped == {}
+    # a spike of height is one still, and without an attitude the distance is judged
+    jumped = banked.value.copy()
+    jumped[50] += 5.0
+    flight = screen(replace(_log(replace(banked, value=jumped)), attitude=attitude))
+    assert flight.sensors[0].dropped == {SPIKE: 1}
+    assert screen(_log(banked)).sensors[0].dropped == {SPIKE: 1}
 
 
 def test_rangefinder_codes_and_pinned_maximum() -> None:

@@ -369,6 +369,15 @@ MIN_COS_TILT = math.cos(math.radians(MAX_TILT_DEG))
 TILTED = f"tilted more than {MAX_TILT_DEG:.0f} degrees"
 
 
+def tilt_at(series: Series, attitude: Attitude) -> FloatArray:
+    """``cos(roll) cos(pitch)`` at each sample of ``series`` that ``attitude`` covers (at least
+    two samples of it), NaN at the others."""
+    tilt = np.full(series.t.size, np.nan)
+    inside = (series.t >= attitude.t[0]) & (series.t <= attitude.t[-1])
+    tilt[inside] = attitude.down_at(series.t[inside])[:, 2]
+    return tilt
+
+
 def tilt_correct(series: Series, attitude: Attitude | None) -> Series:
     """Vertical height from a downward rangefinder's distance [m]: ``d cos(roll) cos(pitch)``.
 
@@ -380,10 +389,9 @@ def tilt_correct(series: Series, attitude: Attitude | None) -> Series:
         return series
     if attitude is None or attitude.t.size < 2:
         return replace(series, datum=f"{series.datum} (not tilt-corrected: no attitude)")
-    inside = (series.t >= attitude.t[0]) & (series.t <= attitude.t[-1])
-    tilt = np.full(series.t.size, np.nan)
-    tilt[inside] = attitude.down_at(series.t[inside])[:, 2]  # cos(roll) cos(pitch)
-    level = inside & (tilt >= MIN_COS_TILT)
+    tilt = tilt_at(series, attitude)
+    inside = np.isfinite(tilt)
+    level = tilt >= MIN_COS_TILT
     dropped = dict(series.dropped)
     if (~inside).any():
         dropped["outside the attitude's time range"] = int((~inside).sum())

@@ -50,6 +50,7 @@ from dataclasses import replace
 import numpy as np
 import numpy.typing as npt
 
+from altfuse.datum import MIN_COS_TILT, tilt_at
 from altfuse.metrics import running_max, running_median, running_white_noise, white_noise_sigma
 from altfuse.model import Attitude, FlightLog, FloatArray, Imu, Series, Vibration
 
@@ -236,8 +237,11 @@ def screen_series(
     span: tuple[float, float] | None,
     rangefinder_max_m: float | None = None,
     rangefinder_min_m: float | None = None,
+    upright: FloatArray | None = None,
 ) -> Series:
-    """``s`` without its impossible samples; ``dropped`` counts them by reason."""
+    """``s`` without its impossible samples; ``dropped`` counts them by reason. ``upright``: a
+    raw rangefinder's factor to the vertical at each sample (:func:`_upright`), with which its
+    spikes are judged, as heights."""
     checks: list[tuple[str, Mask]] = [(BEYOND_BOOT, s.t > MAX_BOOT_S)]
     if span is not None:
         checks.append((OUTSIDE_LOG, (s.t < span[0]) | (s.t > span[1])))
@@ -262,7 +266,10 @@ def screen_series(
         if idx.size:
             dropped[reason] = dropped.get(reason, 0) + int(idx.size)
             keep[idx] = False
-    spikes = np.flatnonzero(keep)[_spikes(s.t[keep], s.value[keep])]
+    # a spike is one of heights: a rangefinder's slant distance in a quick bank is none
+    judged = keep if upright is None else keep & np.isfinite(upright)
+    heights = s.value if upright is None else s.value * upright
+    spikes = np.flatnonzero(judged)[_spikes(s.t[judged], heights[judged])]
     if spikes.size:
         dropped[SPIKE] = int(spikes.size)
         keep[spikes] = False
@@ -334,8 +341,15 @@ def _thawed(s: Series, run: tuple[int, int], other: Series) -> bool:
 def screen(flight: FlightLog) -> FlightLog:
     """``flight`` with every source screened (see the module doc); empty sources dropped."""
     span = log_span(flight.sensors)
+    flight = screen_inputs(flight, span)  # first: the attitude a rangefinder's spikes are seen by
     screened_all = [
-        screen_series(s, span, _range_limit(flight, s, "MAX_CM"), _range_limit(flight, s, "MIN_CM"))
+        screen_series(
+            s,
+            span,
+            _range_limit(flight, s, "MAX_CM"),
+            _range_limit(flight, s, "MIN_CM"),
+            _upright(s, flight.attitude),
+        )
         for s in flight.sensors
     ]
     with_stuck, notes = [], list(flight.notes)
@@ -355,16 +369,24 @@ def screen(flight: FlightLog) -> FlightLog:
         else:
             reasons = ", ".join(f"{n} {r}" for r, n in screened.dropped.items())
             dropped_sources[s.name] = f"{s.source}: {NO_PLAUSIBLE_SAMPLE} ({reasons})"
-    return screen_inputs(
-        replace(
-            flight,
-            sensors=tuple(sensors),
-            references=references,
-            dropped_sources=dropped_sources,
-            notes=tuple(notes),
-        ),
-        span,
+    return replace(
+        flight,
+        sensors=tuple(sensors),
+        references=references,
+        dropped_sources=dropped_sources,
+        notes=tuple(notes),
     )
+
+
+def _upright(s: Series, attitude: Attitude | None) -> FloatArray | None:
+    """A raw rangefinder distance's factor to the vertical at each sample (``cos(roll)
+    cos(pitch)``; NaN where it is tilted beyond MAX_TILT_DEG or the attitude does not cover it,
+    :func:`altfuse.datum.tilt_correct` drops those); None for any other source, or without an
+    attitude."""
+    if not s.is_raw_rangefinder or attitude is None or attitude.t.size < 2:
+        return None
+    tilt = tilt_at(s, attitude)
+    return np.where(tilt >= MIN_COS_TILT, tilt, np.nan)
 
 
 def _keep_rows(
