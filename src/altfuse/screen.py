@@ -23,7 +23,8 @@ RFND Stat) come first; these checks come after, on each source:
 - **spikes**: a sample away from both neighbours in the same direction, more than ``SPIKE_MIN_M``
   and faster than ``MAX_VERTICAL_SPEED_M_S`` to reach from either, or further than an
   acceleration of ``MAX_VERTICAL_ACCEL_M_S2`` could take it and back and than the noise around
-  it: no aircraft does that;
+  it: no aircraft does that (a raw rangefinder's judged on its heights, with the attitude
+  screened first: its slant distance in a quick bank is no spike);
 - **stuck at one value**: the same value to the bit for ``STUCK_MIN_S`` seconds or more
   (``STUCK_MIN_SAMPLES`` samples) while another source moved more than its noise and
   ``MOTION_MIN_M``: a receiver that reports 0.00 m with a 3D fix, a frozen driver. A sensor at
