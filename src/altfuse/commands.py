@@ -350,8 +350,9 @@ def fuse(
     outputs = Outputs(output, meta_path, weights_path, plot_path)
     outputs.refuse(log, force)
     streamed = output == STDOUT or is_stream(output)  # the table written into a stream
+    say = logging.getLogger("altfuse")
     if outputs.meta_path is None:
-        logging.getLogger("altfuse").warning(
+        say.warning(
             "%s: the table goes to %s, without its provenance (--meta names a file)",
             log.name, "standard output" if output == STDOUT else output,
         )  # fmt: skip
@@ -359,31 +360,31 @@ def fuse(
         done = run_to_files(log, outputs, opts)
     run = done.run
     for note in run.log.notes:
-        logging.getLogger("altfuse").info("%s", note)
+        say.info("%s", note)
     warning = damage(run.log)
     if warning:
-        logging.getLogger("altfuse").warning("%s", warning)
+        say.warning("%s", warning)
     if run.referred.dropped:
-        logging.getLogger("altfuse").warning("%s: %s", log.name, _left_out(run.referred.dropped))
+        say.warning("%s: %s", log.name, _left_out(run.referred.dropped))
     record = run.provenance["guard"]
     if record["diverged_ticks"]:
         lost = f", {record['lost_ticks']} of them without a value" if record["lost_ticks"] else ""
-        logging.getLogger("altfuse").warning(
+        say.warning(
             "%s: %s left every sensor on %s (by up to %.1f m%s): status 'diverged'",
             log.name, method, counted(record["diverged_ticks"], "tick"), record["max_excursion_m"],
             lost,
         )  # fmt: skip
     check = run.result.params.get("model_check", "passed")
     if check != "passed":
-        logging.getLogger("altfuse").warning("%s: %s's model check %s", log.name, method, check)
+        say.warning("%s: %s's model check %s", log.name, method, check)
     if unused_here := run.result.params.get("not_used"):
-        logging.getLogger("altfuse").warning(
+        say.warning(
             "%s: not used, as this log does not have the sensors (its sensors: %s): %s",
             log.name, ", ".join(run.referred.names), unused_here,
         )  # fmt: skip
     counts = run.provenance["status_counts"]
     sidecar = done.written.get("meta", "none")
-    if streamed and not logging.getLogger("altfuse").isEnabledFor(logging.WARNING):
+    if streamed and not say.isEnabledFor(logging.WARNING):
         return  # -q: only errors on stderr, where this line goes beside a streamed table
     click.echo(
         f"{'standard output' if output == STDOUT else output}: {run.referred.t.size} rows, "
