@@ -29,7 +29,7 @@ from altfuse.io import read_log
 from altfuse.io.dataflash import RESET_MAX, _Records, rejoined
 from altfuse.io.dataflash_writer import DataFlashWriter
 from altfuse.io.fastdf import index_file
-from altfuse.model import FEW_IN_A_ROW, Samples, Series, usable_series
+from altfuse.model import FEW_IN_A_ROW, NO_TIME, FloatArray, Samples, Series, usable_series
 from altfuse.screen import GPS_CONVERGED_VACC_M, NOT_CONVERGED, not_converged
 from altfuse.simulate import simulate_flight, write_simulated_log
 from conftest import SAMPLE_LOG, shared_log
@@ -528,8 +528,9 @@ def test_the_land_detector_is_read_from_stat() -> None:
 )
 def test_copters_take_offs_are_read_from_its_land_detectors_events(log: str) -> None:
     """Copter logs no state of its land detector, only its changes: NOT_LANDED (``EV`` 28)
-    when it says the vehicle left the ground; in Copter 3.4 the record has no time, and takes
-    that of the record before it, as pymavlink's reader does."""
+    when it says the vehicle left the ground; in Copter 3.4 the record has no time, and is
+    timed by its place among the records around it: within 50 ms of the time of the record
+    before it, which pymavlink's reader gives it."""
     path = shared_log(log)
     m = mavutil.mavlink_connection(str(path))
     said, clock = [], 0.0
@@ -675,3 +676,87 @@ def test_records_read_again_once_let_go_are_the_same() -> None:
     assert not any(key[0] == "BARO" for key in rec._raw)
     np.testing.assert_array_equal(rec.column("BARO", "Alt"), before[0])
     np.testing.assert_array_equal(rec.times("BARO"), before[1])
+
+
+#: The FMT lines of Copter 3.0 and 3.1 logs (ArduPilot's LogAnalyzer examples
+#: ``underpowered.log``, 3.0.1, and ``mechanical_fail.log``, 3.1): times only in GPS records
+#: (3.0: ``Time``, the GPS time of week; 3.1: ``T``, since boot) and 3.1's IMU records.
+_OLD_COPTER_FMT = {
+    "3.0": [
+        "FMT, 130, 35, GPS, BIBcLLeeEe, Status,Time,NSats,HDop,Lat,Lng,RelAlt,Alt,Spd,GCrs",
+        "FMT, 4, 25, CTUN, hcefhhhhh, ThrIn,SonAlt,BarAlt,WPAlt,NavThr,AngBst,CRate,ThrOut,DCRate",
+    ],
+    "3.1": [
+        "FMT, 130, 45, GPS, BIHBcLLeeEefI, "
+        "Status,TimeMS,Week,NSats,HDop,Lat,Lng,RelAlt,Alt,Spd,GCrs,VZ,T",
+        "FMT, 131, 31, IMU, Iffffff, TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ",
+        "FMT, 4, 25, CTUN, hcefchhhh, "
+        "ThrIn,SonAlt,BarAlt,WPAlt,DesSonAlt,AngBst,CRate,ThrOut,DCRate",
+    ],
+}
+
+
+def _old_copter_log(path: Path, version: str, start_ms: int) -> FloatArray:
+    """A text log as Copter ``version`` writes it: 60 s at a 50 Hz loop from ``start_ms``, a
+    climb to 10 m from 20 s; GPS at 5 Hz, CTUN (the barometer, no time of its own) at 10 Hz,
+    3.1's IMU at 50 Hz, each record after the loop's first. Returns the CTUN records' true
+    times [s]."""
+    lines = ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format", *_OLD_COPTER_FMT[version]]
+    lines.append(f"MSG, ArduCopter V{version}.1")
+    ctun = []
+    for k in range(3000):
+        ms = start_ms + 20 * k
+        height = float(np.clip((k - 1000) / 50.0, 0.0, 10.0))
+        if version == "3.1":
+            lines.append(f"IMU, {ms}, 0, 0, 0, 0, 0, -9.81")
+        if k % 10 == 5 or (version == "3.0" and k < 10 and k % 5 == 0):
+            ctun.append(ms / 1e3)  # 3.0: two records before the first GPS record, untimed
+            lines.append(f"CTUN, 0, 0, {height:.2f}, 0, 0, 0, 0, 0, 0")
+        if k % 10 == 9:
+            times = f"{ms % 604_800_000}" if version == "3.0" else f"{ms + 300}, 1774"
+            lines.append(
+                f"GPS, 3, {times}, 9, 1.2, -39.49, 176.75, {height:.2f}, {50 + height:.2f}, "
+                "0, 0" + ("" if version == "3.0" else f", 0, {ms}")
+            )
+        elif version == "3.1" and k % 10 == 4:
+            lines.append(f"CTUN, 0, 0, {height:.2f}, 0, 0, 0, 0, 0, 0")
+            ctun.append(ms / 1e3)
+    path.write_text("\n".join(lines) + "\n")
+    return np.asarray(ctun)
+
+
+@pytest.mark.parametrize(
+    ("version", "start_ms", "before_clock"),
+    [("3.1", 60_000, 0), ("3.0", 604_800_000 - 30_000, 2)],  # 3.0: across a GPS week's end
+)
+def test_records_without_times_of_their_own_are_timed_by_their_place_among_those_with(
+    tmp_path: Path, version: str, start_ms: int, before_clock: int
+) -> None:
+    """Copter up to 3.1 logs times in GPS and IMU records alone (3.0: the GPS time of week,
+    nothing since boot): its barometer, in CTUN, is timed by each record's place between the
+    timed records around it, to within the interval between those (20 ms with 3.1's IMU,
+    200 ms with 3.0's GPS alone), across the end of a GPS week; a record before the first
+    timed one has no time, and is counted so."""
+    truth = _old_copter_log(tmp_path / "old.log", version, start_ms)
+    log = read_log(tmp_path / "old.log")
+    baro = next(s for s in log.sensors if s.source == "CTUN.BarAlt")
+    assert baro.dropped == ({NO_TIME: before_clock} if before_clock else {})
+    clock_s = 0.02 if version == "3.1" else 0.2
+    np.testing.assert_allclose(baro.t, truth[before_clock:], atol=clock_s)
+    assert np.all(np.diff(baro.t) > 0)
+    gps = next(s for s in log.sensors if s.kind == "gps")
+    assert np.all(np.diff(gps.t) == pytest.approx(0.2))  # 3.0: on from 604800 s, one week on
+    said = " ".join(log.notes)
+    assert "CTUN: no time of their own in this firmware" in said
+    assert ("GPS time of week: this firmware logs no time since boot" in said) == (version == "3.0")
+
+
+def test_a_log_with_no_time_in_any_record_says_so(tmp_path: Path) -> None:
+    """A log whose records have no time (Copter 3.0's without a GPS record) is refused, and
+    not as a log without sensors."""
+    _old_copter_log(tmp_path / "old.log", "3.0", 0)
+    text = (tmp_path / "old.log").read_text().splitlines()
+    (tmp_path / "untimed.log").write_text("\n".join(x for x in text if not x.startswith("GPS")))
+    log = read_log(tmp_path / "untimed.log")
+    assert log.sensors == ()
+    assert log.dropped_sources == {"CTUN": "no time of its own, and no record in the log has one"}

@@ -157,6 +157,9 @@ class Series:
 #: its rangefinder from the third good reading in a row (``RANGEFINDER_HEALTH_MAX``).
 RANGEFINDER_HEALTHY_READINGS = 3
 FEW_IN_A_ROW = f"fewer than {RANGEFINDER_HEALTHY_READINGS} valid readings in a row"
+#: A record without a time of its own logged before the first record that has one (Copter up
+#: to 3.1 logs times in GPS and IMU records alone: ``altfuse.io.dataflash``) has none.
+NO_TIME = "no time (logged before the first record with one)"
 
 
 def usable_series(
@@ -171,8 +174,11 @@ def usable_series(
     mask, and a rangefinder's in runs of fewer than ``RANGEFINDER_HEALTHY_READINGS`` valid ones
     between invalid ones (each counted by reason in ``dropped``); or, where none is left, why."""
     t, value = samples
-    keep = np.isfinite(t) & np.isfinite(value)
-    dropped = {"not a finite number": int((~keep).sum())} if (~keep).any() else {}
+    timed, finite = np.isfinite(t), np.isfinite(value)
+    keep = timed & finite
+    dropped = {NO_TIME: int((~timed).sum())} if (~timed).any() else {}
+    if (timed & ~finite).any():
+        dropped["not a finite number"] = int((timed & ~finite).sum())
     for reason, mask in invalid.items():
         if (hit := keep & mask).any():
             dropped[reason] = int(hit.sum())

@@ -23,6 +23,10 @@ Altitude sources (inputs):
 - Fallbacks: with no BARO records, ``CTUN.BAlt``/``BarAlt``; with no RFND/SONR records,
   ``CTUN.SAlt``/``SonAlt`` (0 there means "no reading"). The choice is noted.
 
+Times are each record's own (:meth:`_Records.time_field`); Copter up to 3.1 logs none in CTUN
+(its barometer) and ATT, Copter 3.4 none in EV: those take the times of the records around
+them (:meth:`_Records.times`).
+
 Kept for later stages: IMU (first instance) accelerations, ATT attitude, the horizontal speed
 over ground (``GPS.Spd`` of the first instance with a 3D fix), each barometer's temperature
 (``BARO.Temp``). References, never
@@ -38,6 +42,7 @@ import re
 from collections.abc import Iterator, Mapping
 from concurrent.futures import Future
 from dataclasses import replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -74,6 +79,8 @@ _OTHER_TYPES = (
     "VIBE", "STAT", "GPA", "GPA2", "GPA3", "EV",
 )  # fmt: skip
 WANTED_TYPES = frozenset(_SENSOR_TYPES + _OTHER_TYPES)
+#: The wanted types read as samples in time (the others are the log's text and parameters).
+_RECORDED = WANTED_TYPES - {"MSG", "VER", "FMTU", "PARM"}
 _UNIT_TYPES = frozenset({"UNIT", "MULT"})  # read with FMTU for the fields' units
 
 #: Format characters of text, and of text and arrays: never a number.
@@ -129,6 +136,18 @@ def _scaled(values: npt.NDArray[Any], char: str) -> FloatArray:
     return out
 
 
+#: A GPS week [s]: Copter up to 3.0 logs no time but its GPS records' time of week.
+GPS_WEEK_S = 7 * 86400.0
+
+
+def across_weeks(t: FloatArray) -> FloatArray:
+    """GPS times of week [s] made continuous across the end of a week (Sunday 00:00 GPS time),
+    where they fall back by more than half a week."""
+    weeks = np.concatenate(([0.0], np.cumsum(np.diff(t) < -GPS_WEEK_S / 2)))
+    out: FloatArray = t + GPS_WEEK_S * weeks
+    return out
+
+
 class _Records:
     """The decoded records of the wanted types, by type name, with their unit metadata."""
 
@@ -151,6 +170,7 @@ class _Records:
             wanted[t]: rows for t, rows in index.records_of(list(wanted)).items()
         }
         self._raw: dict[tuple[str, str], FloatArray] = {}
+        self._times: dict[str, FloatArray] = {}
         self.fmtu: dict[int, tuple[str, str]] = {}
         self.unit_lookup: dict[str, str] = {}
         self.mult_lookup: dict[str, float] = {}
@@ -178,6 +198,7 @@ class _Records:
         type read again is gathered again)."""
         for name in type_names:
             self._tables.pop(name, None)
+            self._times.pop(name, None)
         self._raw = {key: v for key, v in self._raw.items() if key[0] not in type_names}
 
     def table(self, type_name: str) -> npt.NDArray[Any]:
@@ -195,15 +216,27 @@ class _Records:
         )
 
     def timed(self, type_name: str, *fields: str) -> bool:
-        """:meth:`has`, and the type has a time field (damage can rename it in its FMT)."""
-        return self.has(type_name, *fields) and self.time_field(type_name) is not None
+        """:meth:`has`, and the type's records have times (:meth:`times`): a time field of
+        their own (damage can rename it in its FMT), or the log's :attr:`clock`."""
+        return self.has(type_name, *fields) and (
+            self.time_field(type_name) is not None or self.clock is not None
+        )
+
+    @cached_property
+    def clock(self) -> str | None:
+        """The wanted type with a time field of its own and the most records, which times the
+        records of a type with none (:meth:`times`); None where no type has one."""
+        own = [n for n in sorted(WANTED_TYPES) if self.has(n) and self.time_field(n)]
+        return max(own, key=self.n, default=None)
 
     def time_field(self, type_name: str) -> tuple[str, float] | None:
         """The field that holds a record's time since boot, and its units per second.
 
         ``TimeUS`` [us], else ``TimeMS`` [ms] where it is the first field. In Copter up to 3.4
         and Plane up to 3.3 a GPS record's ``TimeMS`` is the GPS time of week and its boot time
-        is ``T`` [ms], as pymavlink's DFReaderClock_msec reads it.
+        is ``T`` [ms], as pymavlink's DFReaderClock_msec reads it. Copter up to 3.0 logs no
+        boot time at all: its GPS records' ``Time`` [ms], the GPS time of week, is the only
+        time in the log (:data:`GPS_WEEK_S`).
         """
         columns = self.formats[type_name].columns
         if "TimeUS" in columns:
@@ -212,7 +245,9 @@ class _Records:
             return "TimeMS", 1e3
         if "T" in columns:
             return "T", 1e3
-        return ("TimeMS", 1e3) if "TimeMS" in columns else None
+        if "TimeMS" in columns:
+            return "TimeMS", 1e3
+        return ("Time", 1e3) if type_name.startswith("GPS") and "Time" in columns else None
 
     def raw(self, type_name: str, col: str) -> FloatArray:
         """A numeric field as pymavlink decodes it (legacy format scales applied); computed once
@@ -245,12 +280,26 @@ class _Records:
         return self.raw(type_name, col) * self.multiplier(type_name, col)
 
     def times(self, type_name: str) -> FloatArray:
-        """Record times since boot [s] (see :meth:`time_field`)."""
-        found = self.time_field(type_name)
-        if found is None:
-            raise KeyError(f"{type_name} has no time field")
-        name, per_second = found
-        return self.raw(type_name, name) / per_second
+        """Record times since boot [s] (see :meth:`time_field`); for a type with no time field,
+        the :attr:`clock`'s records' around each record, interpolated by its place among the
+        records between them (Copter up to 3.1 logs times in its GPS and IMU records alone,
+        Copter 3.4 its ``EV`` records without one). After the clock's last record, its last
+        time (pymavlink's reader gives such a record the time of the record before it); before
+        its first, NaN. Do not modify it."""
+        if type_name not in self._times:
+            found = self.time_field(type_name)
+            if found is not None:
+                name, per_second = found
+                t = self.raw(type_name, name) / per_second
+                self._times[type_name] = across_weeks(t) if name == "Time" else t
+            elif self.clock is not None:
+                types, clock = self.index.types, self.formats[self.clock].type_id
+                at = np.flatnonzero(types == self.formats[type_name].type_id)
+                ticks = np.flatnonzero(types == clock)
+                self._times[type_name] = np.interp(at, ticks, self.times(self.clock), np.nan)
+            else:
+                raise KeyError(f"{type_name} has no time field, and no record type has one")
+        return self._times[type_name]
 
     def multiplier(self, type_name: str, col: str) -> float:
         fmt = self.formats[type_name]
@@ -553,9 +602,9 @@ def _reference(
 ) -> Series | None:
     if not rec.timed(type_name, col):
         return None
-    select = np.ones(rec.n(type_name), dtype=bool)
+    select = np.isfinite(rec.times(type_name))
     if rec.has(type_name, "C"):  # EKF3 logs one record per core: take core 0
-        select = rec.raw(type_name, "C") == 0
+        select &= rec.raw(type_name, "C") == 0
     t = rec.times(type_name)[select]
     value = sign * rec.column(type_name, col)[select]
     keep = np.isfinite(t) & np.isfinite(value)
@@ -671,11 +720,10 @@ RESET_MAX = 100
 
 
 def _read_events(rec: _Records, *events: int) -> tuple[tuple[float, ...], ...]:
-    """Per ``Id`` in ``events``, the times [s] of Copter's ``EV`` records with it (the records'
-    times found once: in an old log, each a search of the whole index)."""
-    if not rec.has("EV", "Id"):
+    """Per ``Id`` in ``events``, the times [s] of Copter's ``EV`` records with it."""
+    if not rec.timed("EV", "Id"):
         return tuple(() for _ in events)
-    t, ids = _event_times(rec), rec.raw("EV", "Id")
+    t, ids = rec.times("EV"), rec.raw("EV", "Id")
     told = np.isfinite(t)
     return tuple(tuple(sorted(t[told & (ids == event)].tolist())) for event in events)
 
@@ -750,29 +798,12 @@ def _rejoin_resets(
     return tuple(each(r) if resets and r.name in RESET_REFERENCES else r for r in references)
 
 
-def _event_times(rec: _Records) -> FloatArray:
-    """The ``EV`` records' times [s]: their own, else (Copter up to 3.4 logs ``EV`` with its
-    ``Id`` alone) the time of the last record before each of the most frequent timed type
-    read (NaN before the first)."""
-    if rec.timed("EV"):
-        return rec.times("EV")
-    clocks = [n for n in sorted(WANTED_TYPES) if n != "EV" and rec.timed(n)]
-    if not clocks:
-        return np.full(rec.n("EV"), np.nan)
-    clock = max(clocks, key=rec.n)
-    index = rec.index
-    at = index.offsets[index.types == rec.formats["EV"].type_id]
-    before = np.searchsorted(index.offsets[index.types == rec.formats[clock].type_id], at) - 1
-    times = np.append(rec.times(clock), np.nan)  # index -1: before the first
-    return np.asarray(times[before])
-
-
 def _read_imu(rec: _Records) -> Imu | None:
     if not rec.timed("IMU", "AccX", "AccY", "AccZ"):
         return None
-    select = np.ones(rec.n("IMU"), dtype=bool)
+    select = np.isfinite(rec.times("IMU"))
     if rec.has("IMU", "I"):
-        select = rec.raw("IMU", "I") == 0
+        select &= rec.raw("IMU", "I") == 0
     acc = np.column_stack([rec.column("IMU", c)[select] for c in ("AccX", "AccY", "AccZ")])
     return Imu("IMU[0].Acc", rec.times("IMU")[select], acc)
 
@@ -780,8 +811,9 @@ def _read_imu(rec: _Records) -> Imu | None:
 def _read_attitude(rec: _Records) -> Attitude | None:
     if not rec.timed("ATT", "Roll", "Pitch", "Yaw"):
         return None
-    angles = [np.deg2rad(rec.column("ATT", c)) for c in ("Roll", "Pitch", "Yaw")]
-    return Attitude("ATT", rec.times("ATT"), *angles)
+    timed = np.isfinite(rec.times("ATT"))
+    angles = [np.deg2rad(rec.column("ATT", c))[timed] for c in ("Roll", "Pitch", "Yaw")]
+    return Attitude("ATT", rec.times("ATT")[timed], *angles)
 
 
 def _firmware(rec: _Records) -> tuple[str, str]:
@@ -818,6 +850,28 @@ def _skipped(index: Index, notes: list[str]) -> int:
     return skipped
 
 
+def _note_clock(b: _Builder) -> None:
+    """Say where the times of the records read come from, where not from their own fields;
+    a sensor's records with none, in a log where no record has one, are left out, and why."""
+    rec = b.rec
+    untimed = [n for n in sorted(_RECORDED) if rec.has(n) and rec.time_field(n) is None]
+    if rec.clock is None:
+        for name in untimed:
+            if name in _SENSOR_TYPES:
+                b.dropped_sources[name] = "no time of its own, and no record in the log has one"
+        return
+    if rec.time_field(rec.clock) == ("Time", 1e3):
+        b.notes.append(
+            f"the log's times are {rec.clock}.Time, the GPS time of week: this firmware logs "
+            "no time since boot"
+        )
+    if untimed:
+        b.notes.append(
+            f"{', '.join(untimed)}: no time of their own in this firmware, each record timed by "
+            f"its place between the {rec.clock} records around it"
+        )
+
+
 def read_dataflash(path: str | Path) -> FlightLog:
     """Read the altitude sources, IMU, attitude and references from a DataFlash log.
 
@@ -838,8 +892,8 @@ def read_dataflash(path: str | Path) -> FlightLog:
 def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     """The flight in ``rec``, the log at ``path`` whose sha256 ``digest`` is computing."""
     b = _Builder(rec)
-    # before any type goes: an old log's EV takes their times
     takeoffs, resets = _read_events(rec, EV_NOT_LANDED, EV_EKF_ALT_RESET)
+    _note_clock(b)
     _read_gps(b)
     rec.done("GPA", "GPA2", "GPA3")
     have_baro = _read_baro(b)
