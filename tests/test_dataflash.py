@@ -760,3 +760,20 @@ def test_a_log_with_no_time_in_any_record_says_so(tmp_path: Path) -> None:
     log = read_log(tmp_path / "untimed.log")
     assert log.sensors == ()
     assert log.dropped_sources == {"CTUN": "no time of its own, and no record in the log has one"}
+
+
+def test_a_temperature_named_t_is_no_time(tmp_path: Path) -> None:
+    """``T`` is a GPS record's time since boot in Copter 3.1-3.4, an IMU record's temperature
+    [degC]: an IMU record without a time field takes the times around it, not its
+    temperature's."""
+    path = tmp_path / "imu_t.bin"
+    with path.open("wb") as handle:
+        writer = DataFlashWriter(handle)
+        writer.define("BARO", "Qf", "TimeUS,Alt", "sm", "F0")
+        writer.define("IMU", "ffff", "AccX,AccY,AccZ,T", "oooO", "0000")
+        for k in range(100):
+            writer.write("BARO", 10_000_000 + 20_000 * k, 0.0)
+            writer.write("IMU", 0.0, 0.0, -9.81, 45.0)
+    imu = read_log(path).imu
+    assert imu is not None  # half-way between two BARO records; after the last, at its time
+    np.testing.assert_allclose(imu.t, np.minimum(10.01 + 0.02 * np.arange(100), 11.98))

@@ -219,15 +219,25 @@ class _Records:
         """:meth:`has`, and the type's records have times (:meth:`times`): a time field of
         their own (damage can rename it in its FMT), or the log's :attr:`clock`."""
         return self.has(type_name, *fields) and (
-            self.time_field(type_name) is not None or self.clock is not None
+            self.time_field(type_name) is not None or bool(self.clock)
         )
 
     @cached_property
-    def clock(self) -> str | None:
-        """The wanted type with a time field of its own and the most records, which times the
-        records of a type with none (:meth:`times`); None where no type has one."""
-        own = [n for n in sorted(WANTED_TYPES) if self.has(n) and self.time_field(n)]
-        return max(own, key=self.n, default=None)
+    def clock(self) -> tuple[str, ...]:
+        """The wanted types of samples in time (not ``PARM``, ``MSG``: a 4.x log's thousand
+        parameters come at boot) whose records have a time field of their own: they time the
+        records of a type with none (:meth:`times`)."""
+        return tuple(n for n in sorted(_RECORDED) if self.has(n) and self.time_field(n))
+
+    @cached_property
+    def _ticks(self) -> tuple[npt.NDArray[np.intp], FloatArray]:
+        """The :attr:`clock`'s records' places in the log's chain of records, and their times."""
+        types = self.index.types
+        t = np.full(types.size, np.nan)
+        for name in self.clock:
+            t[types == self.formats[name].type_id] = self.times(name)
+        at = np.flatnonzero(np.isfinite(t))
+        return at, t[at]
 
     def time_field(self, type_name: str) -> tuple[str, float] | None:
         """The field that holds a record's time since boot, and its units per second.
@@ -243,11 +253,12 @@ class _Records:
             return "TimeUS", 1e6
         if columns[:1] == ("TimeMS",):
             return "TimeMS", 1e3
-        if "T" in columns:
+        gps = type_name.startswith("GPS")  # another type's T is a temperature (IMU.T)
+        if gps and "T" in columns:
             return "T", 1e3
         if "TimeMS" in columns:
             return "TimeMS", 1e3
-        return ("Time", 1e3) if type_name.startswith("GPS") and "Time" in columns else None
+        return ("Time", 1e3) if gps and "Time" in columns else None
 
     def raw(self, type_name: str, col: str) -> FloatArray:
         """A numeric field as pymavlink decodes it (legacy format scales applied); computed once
@@ -281,22 +292,20 @@ class _Records:
 
     def times(self, type_name: str) -> FloatArray:
         """Record times since boot [s] (see :meth:`time_field`); for a type with no time field,
-        the :attr:`clock`'s records' around each record, interpolated by its place among the
-        records between them (Copter up to 3.1 logs times in its GPS and IMU records alone,
-        Copter 3.4 its ``EV`` records without one). After the clock's last record, its last
-        time (pymavlink's reader gives such a record the time of the record before it); before
-        its first, NaN. Do not modify it."""
+        the times of the :attr:`clock`'s records around each record, interpolated by its place
+        among the records between them (Copter up to 3.1 logs times in its GPS and IMU records
+        alone, Copter 3.4 its ``EV`` records without one). After the last timed record, its
+        time (pymavlink's reader gives such a record the time of the record before it, in a 3.1
+        log without IMU records up to 0.2 s early); before the first, NaN. Do not modify it."""
         if type_name not in self._times:
             found = self.time_field(type_name)
             if found is not None:
                 name, per_second = found
                 t = self.raw(type_name, name) / per_second
                 self._times[type_name] = across_weeks(t) if name == "Time" else t
-            elif self.clock is not None:
-                types, clock = self.index.types, self.formats[self.clock].type_id
-                at = np.flatnonzero(types == self.formats[type_name].type_id)
-                ticks = np.flatnonzero(types == clock)
-                self._times[type_name] = np.interp(at, ticks, self.times(self.clock), np.nan)
+            elif self.clock:
+                at = np.flatnonzero(self.index.types == self.formats[type_name].type_id)
+                self._times[type_name] = np.interp(at, *self._ticks, left=np.nan)
             else:
                 raise KeyError(f"{type_name} has no time field, and no record type has one")
         return self._times[type_name]
@@ -855,20 +864,20 @@ def _note_clock(b: _Builder) -> None:
     a sensor's records with none, in a log where no record has one, are left out, and why."""
     rec = b.rec
     untimed = [n for n in sorted(_RECORDED) if rec.has(n) and rec.time_field(n) is None]
-    if rec.clock is None:
+    if not rec.clock:
         for name in untimed:
             if name in _SENSOR_TYPES:
                 b.dropped_sources[name] = "no time of its own, and no record in the log has one"
         return
-    if rec.time_field(rec.clock) == ("Time", 1e3):
+    if all(rec.time_field(n) == ("Time", 1e3) for n in rec.clock):
         b.notes.append(
-            f"the log's times are {rec.clock}.Time, the GPS time of week: this firmware logs "
-            "no time since boot"
+            f"the log's times are {', '.join(rec.clock)} Time, the GPS time of week: this "
+            "firmware logs no time since boot"
         )
     if untimed:
         b.notes.append(
             f"{', '.join(untimed)}: no time of their own in this firmware, each record timed by "
-            f"its place between the {rec.clock} records around it"
+            "its place between the records around it that have one"
         )
 
 
