@@ -86,12 +86,15 @@ def test_an_older_logs_text_reads_as_its_binary(tmp_path: Path) -> None:
 
 
 def test_mission_planners_and_apm_planners_text_reads_within_its_rounding(tmp_path: Path) -> None:
-    """Floats to 7 significant digits, Windows line ends, and APM Planner's FMT line without
-    its own "Columns": the fused heights within micrometres of the binary's."""
+    """Floats to 7 significant digits, Windows line ends, flight modes by their names, and APM
+    Planner's FMT line without its own "Columns": the fused heights within micrometres of the
+    binary's, and no line left out."""
     text = as_text(SAMPLE_LOG, tmp_path / "mission.log", digits=7, newline="\r\n")
     lines = text.read_bytes().split(b"\r\n")
     assert lines[0] == b"FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format,Columns"
     lines[0] = b"FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format"
+    lines[1:1] = [b"FMT, 201, 14, MODE, QMBB, TimeUS,Mode,ModeNum,Rsn"]
+    lines[5000:5000] = [b"MODE, 55000000, Loiter, 5, 2", b"MODE, 55000001, QHover, 18, 2"]
     text.write_bytes(b"\r\n".join(lines))
     fuse(SAMPLE_LOG, tmp_path / "binary.csv")
     fuse(text, tmp_path / "text.csv")
@@ -99,7 +102,9 @@ def test_mission_planners_and_apm_planners_text_reads_within_its_rounding(tmp_pa
     read = np.genfromtxt(tmp_path / "text.csv", delimiter=",", names=True)
     assert read.size == binary.size == 1200
     assert np.nanmax(np.abs(read["fused_alt_m"] - binary["fused_alt_m"])) < 1e-5
-    assert not read_log(text).damaged
+    flight = read_log(text)
+    assert not flight.damaged
+    assert flight.record_counts["MODE"] == 2
 
 
 def test_a_text_log_delimited_by_bare_commas_reads_the_same(tmp_path: Path) -> None:

@@ -11,7 +11,10 @@ written in their units, a line whose type is undeclared or whose fields are too 
 :class:`~altfuse.io.dataflash_writer.RecordType`), so that one reader
 (:mod:`altfuse.io.dataflash`) reads both forms, with the same checks and the same damage
 accounting; a line that does not pack (a field that is no number, a value out of its field's
-range, a partial last line) is left out and counted.
+range, a partial last line) is left out and counted. A flight mode (format ``M``) written by
+its name, as Mission Planner's "convert to text" and Copter 3.0-3.1's own text dumps write it
+("Stabilize"), is no damage: its number, which the name alone does not give (each vehicle
+numbers its modes), is packed as :data:`NAMED_MODE` (altfuse reads no ``MODE`` record).
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ from altfuse.io.framing import FMT_COLUMNS, FMT_FORMAT, FMT_TYPE
 
 #: The fields' delimiter: ", ", or "," where the first FMT line has no space (pymavlink's).
 DELIMITER = ", "
+#: The number packed for a flight mode written by its name: no mode's (they count from 0).
+NAMED_MODE = "-1"
 #: A text log's first bytes hold an FMT line (pymavlink looks for "FMT," in the first 8,000).
 _FMT_LINE = re.compile(rb"(?:^|\n)FMT, ?\d+, ?\d+, ?")
 
@@ -96,6 +101,11 @@ class BinaryFromText(io.RawIOBase):
             values = [*values[:4], FMT_COLUMNS]  # APM Planner leaves out FMT's own "Columns"
         if len(values) != width:
             return self._leave_out(f"{len(values)} fields where {kind.name} has {width}")
+        if "M" in kind.format:
+            values = [
+                NAMED_MODE if char == "M" and v.isidentifier() else v
+                for char, v in zip(kind.format, values, strict=True)
+            ]
         try:
             record = self._declare(values) if kind.name == "FMT" else kind.record(values)
         except (ValueError, struct.error, OverflowError, KeyError) as exc:
