@@ -611,9 +611,9 @@ def _reference(
 ) -> Series | None:
     if not rec.timed(type_name, col):
         return None
-    select = np.isfinite(rec.times(type_name))
+    select = np.ones(rec.n(type_name), dtype=bool)
     if rec.has(type_name, "C"):  # EKF3 logs one record per core: take core 0
-        select &= rec.raw(type_name, "C") == 0
+        select = rec.raw(type_name, "C") == 0
     t = rec.times(type_name)[select]
     value = sign * rec.column(type_name, col)[select]
     keep = np.isfinite(t) & np.isfinite(value)
