@@ -751,6 +751,24 @@ def test_records_without_times_of_their_own_are_timed_by_their_place_among_those
     assert ("GPS time of week: this firmware logs no time since boot" in said) == (version == "3.0")
 
 
+def test_a_gps_time_of_0_times_nothing(tmp_path: Path) -> None:
+    """A receiver without a fix knows no time of week (``GPS.Time`` 0): in a Copter 3.0 log
+    the records before its first known time have none, rather than times spread from 0 to
+    that time (40 barometer samples dropped as "time far outside the log" so)."""
+    truth = _old_copter_log(tmp_path / "old.log", "3.0", 604_800_000 - 30_000)
+    lines = (tmp_path / "old.log").read_text().splitlines()
+    unknown = [k for k, line in enumerate(lines) if line.startswith("GPS")][:20]
+    for k in unknown:
+        fields = lines[k].split(", ")
+        lines[k] = ", ".join([fields[0], "1", "0", *fields[3:]])
+    (tmp_path / "nofix.log").write_text("\n".join(lines) + "\n")
+    baro = next(s for s in read_log(tmp_path / "nofix.log").sensors if s.kind == "baro")
+    # the 21st GPS record, the first with a time, is the loop's 209th (every 10th from the 9th)
+    timed = int(np.sum(truth > truth[0] + 209 * 0.02))
+    assert baro.dropped == {NO_TIME: truth.size - timed}
+    np.testing.assert_allclose(baro.t, truth[-timed:], atol=0.2)
+
+
 def test_a_log_with_no_time_in_any_record_says_so(tmp_path: Path) -> None:
     """A log whose records have no time (Copter 3.0's without a GPS record) is refused, and
     not as a log without sensors."""

@@ -231,12 +231,13 @@ class _Records:
 
     @cached_property
     def _ticks(self) -> tuple[npt.NDArray[np.intp], FloatArray]:
-        """The :attr:`clock`'s records' places in the log's chain of records, and their times."""
+        """The :attr:`clock`'s records' places in the log's chain of records, and their times;
+        not those whose time is 0, none (a GPS's before it knows the time of week)."""
         types = self.index.types
         t = np.full(types.size, np.nan)
         for name in self.clock:
             t[types == self.formats[name].type_id] = self.times(name)
-        at = np.flatnonzero(np.isfinite(t))
+        at = np.flatnonzero(t > 0)
         return at, t[at]
 
     def time_field(self, type_name: str) -> tuple[str, float] | None:
