@@ -748,7 +748,9 @@ def test_records_without_times_of_their_own_are_timed_by_their_place_among_those
     assert np.all(np.diff(gps.t) == pytest.approx(0.2))  # 3.0: on from 604800 s, one week on
     said = " ".join(log.notes)
     assert "CTUN: no time of their own in this firmware" in said
-    assert ("GPS time of week: this firmware logs no time since boot" in said) == (version == "3.0")
+    assert ("times are GPS.Time, the GPS time of week: this firmware logs no time" in said) == (
+        version == "3.0"
+    )
 
 
 def test_a_gps_time_of_0_times_nothing(tmp_path: Path) -> None:

@@ -871,9 +871,10 @@ def _note_clock(b: _Builder) -> None:
                 b.dropped_sources[name] = "no time of its own, and no record in the log has one"
         return
     if all(rec.time_field(n) == ("Time", 1e3) for n in rec.clock):
+        times = ", ".join(f"{name}.Time" for name in rec.clock)
         b.notes.append(
-            f"the log's times are {', '.join(rec.clock)} Time, the GPS time of week: this "
-            "firmware logs no time since boot"
+            f"the log's times are {times}, the GPS time of week: this firmware logs no time "
+            "since boot"
         )
     if untimed:
         b.notes.append(
