@@ -756,7 +756,8 @@ def test_records_without_times_of_their_own_are_timed_by_their_place_among_those
 def test_a_gps_time_of_0_times_nothing(tmp_path: Path) -> None:
     """A receiver without a fix knows no time of week (``GPS.Time`` 0): in a Copter 3.0 log
     the records before its first known time have none, rather than times spread from 0 to
-    that time (40 barometer samples dropped as "time far outside the log" so)."""
+    that time (so spread, they were dropped as "time far outside the log", and warned of as
+    implausible)."""
     truth = _old_copter_log(tmp_path / "old.log", "3.0", 604_800_000 - 30_000)
     lines = (tmp_path / "old.log").read_text().splitlines()
     unknown = [k for k, line in enumerate(lines) if line.startswith("GPS")][:20]
