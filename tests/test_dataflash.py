@@ -369,6 +369,42 @@ def test_a_telemetry_log_is_named_as_one(tmp_path: Path, version: str, signed: b
         read_log(path)
 
 
+def test_an_archive_is_named_as_one_with_what_it_holds(tmp_path: Path) -> None:
+    """A fleet's logs come zipped from a cloud or a ground station: a zip, 7z, rar or tar
+    archive is refused as such, a zip naming its files, not as 'not a log'; a batch that finds
+    no log but zips says so."""
+    import tarfile
+    import zipfile
+
+    zipped = tmp_path / "logs" / "flights.zip"
+    zipped.parent.mkdir()
+    with zipfile.ZipFile(zipped, "w") as archive:
+        for name in ("00000001.BIN", "00000002.BIN", "00000003.BIN", "00000004.BIN"):
+            archive.write(SAMPLE_LOG, name)
+    with pytest.raises(LogReadError, match=re.escape(
+        "flights.zip: a zip archive of 4 files (00000001.BIN, 00000002.BIN, 00000003.BIN and "
+        "1 more), not a log: extract the log from it"
+    )):  # fmt: skip
+        read_log(zipped)
+    tarred = tmp_path / "flight.tar"
+    with tarfile.open(tarred, "w") as archive:
+        archive.add(shared_log("px4/px4_sitl_yuneec_position.ulg"), "flight.ulg")
+    with pytest.raises(LogReadError, match=r"flight\.tar: a tar archive, not a log"):
+        read_log(tarred)
+    seven = tmp_path / "flight.7z"
+    seven.write_bytes(b"7z\xbc\xaf\x27\x1c" + bytes(100))
+    with pytest.raises(LogReadError, match=r"flight\.7z: a 7z archive, not a log"):
+        read_log(seven)
+    batch = subprocess.run(
+        [sys.executable, "-m", "altfuse", "batch", str(zipped.parent), "-o", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert batch.returncode == 1
+    assert "; 1 *.zip there: extract the logs from them" in batch.stderr
+
+
 @pytest.mark.parametrize(("suffix", "pack"), [(".gz", gzip.compress), (".bz2", bz2.compress),
                                                (".xz", lzma.compress)])  # fmt: skip
 def test_a_compressed_log_reads_as_the_log_it_holds(

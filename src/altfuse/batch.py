@@ -78,6 +78,9 @@ LOG_PATTERNS = tuple(
 #: folder may hold a log as ``.bin`` and as the ``.log`` converted from it, and other
 #: programs' logs), but with ``--pattern``.
 TEXT_PATTERN = "*.log"
+#: Zip archives, which a batch names where it finds no log: their logs are to be extracted
+#: (:func:`altfuse.io.read_log` refuses an archive, naming what it holds).
+ZIP_PATTERN = "*.zip"
 #: The summary as Parquet too, with ``--format parquet``.
 PARQUET_SUMMARY = "summary.parquet"
 _PR_SET_PDEATHSIG = 1
@@ -363,11 +366,12 @@ def plan(
     if not found:
         wanted = " or ".join(repr(p) for p in _patterns(pattern))
         texts = len(_matching(listed, TEXT_PATTERN))
+        zips = len(_matching(listed, ZIP_PATTERN))
         hint = (
             f"; {texts} {TEXT_PATTERN} there: --pattern '{TEXT_PATTERN}' takes them"
             if texts
             else ""
-        )
+        ) + (f"; {zips} {ZIP_PATTERN} there: extract the logs from them" if zips else "")
         raise LogReadError(f"no file matching {wanted} under {', '.join(map(str, paths))}{hint}")
     out = Path(out_dir)
     jobs: list[Job] = []

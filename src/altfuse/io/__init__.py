@@ -18,7 +18,7 @@ from typing import IO, Any, Literal, cast
 from altfuse.errors import AltfuseError, LogReadError
 from altfuse.files import Compression, compression_of, is_stream, stream_kind
 from altfuse.io.framing import FMT_HEADER
-from altfuse.model import FlightLog
+from altfuse.model import FlightLog, counted
 
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 #: The first bytes that tell what a log is (:func:`_kind`): as many as pymavlink reads to tell a
@@ -36,6 +36,10 @@ Kind = Compression | Literal["ulog", "dataflash", "dataflash-text"]
 _TLOG_SPAN_US = (946_684_800_000_000, 4_102_444_800_000_000)
 #: A MAVLink packet's first byte, and its length beyond the payload (header and checksum).
 _MAVLINK_FRAMES = {0xFE: 8, 0xFD: 12}  # MAVLink 1, MAVLink 2 (13 more where signed)
+#: Archives by their first bytes (a fleet's logs come zipped from a cloud or a ground
+#: station): no log, nor a single compressed stream, and said so with what they hold.
+_ARCHIVES = {b"PK\x03\x04": "zip", b"PK\x05\x06": "zip", b"7z\xbc\xaf\x27\x1c": "7z",
+             b"Rar!\x1a\x07": "rar"}  # fmt: skip
 
 
 def sha256_of(path: Path) -> str:
@@ -94,6 +98,13 @@ def _kind(path: Path, head: bytes) -> Kind:
         return packed
     if head.startswith(ULOG_MAGIC):
         return "ulog"
+    # before the DataFlash header is looked for: an archive may hold a log's bytes as they are
+    archive = next((name for magic, name in _ARCHIVES.items() if head.startswith(magic)), None)
+    if archive is not None or head[257:262] == b"ustar":
+        raise LogReadError(
+            f"{path}: a {archive or 'tar'} archive{_members(path)}, not a log: extract the log "
+            "from it (altfuse reads one log compressed with gzip, bzip2 or xz as it is)"
+        )
     if FMT_HEADER in head:
         return "dataflash"
     from altfuse.io.dataflash_text import is_text_log
@@ -109,6 +120,20 @@ def _kind(path: Path, head: bytes) -> Kind:
         f"{path}: not a DataFlash log (no FMT record in its first bytes, as binary or as "
         "text) nor a ULog"
     )
+
+
+def _members(path: Path, shown: int = 3) -> str:
+    """What a zip archive holds, for the refusal: its first ``shown`` files' names (nothing
+    for another archive, or a zip that does not open)."""
+    import zipfile  # only for this refusal
+
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = [i.filename for i in archive.infolist() if not i.is_dir()]
+    except (OSError, zipfile.BadZipFile):
+        return ""
+    more = f" and {len(names) - shown} more" if len(names) > shown else ""
+    return f" of {counted(len(names), 'file')} ({', '.join(names[:shown])}{more})"
 
 
 def _is_telemetry_log(head: bytes, packets: int = 3) -> bool:
