@@ -25,6 +25,7 @@ import pytest
 from pymavlink import mavutil
 
 from altfuse.errors import LogReadError
+from altfuse.evaluation import evaluate
 from altfuse.io import read_log
 from altfuse.io.dataflash import RESET_MAX, _Records, rejoined
 from altfuse.io.dataflash_writer import DataFlashWriter
@@ -717,12 +718,15 @@ def test_records_read_again_once_let_go_are_the_same() -> None:
 #: The FMT lines of Copter 3.0 and 3.1 logs (ArduPilot's LogAnalyzer examples
 #: ``underpowered.log``, 3.0.1, and ``mechanical_fail.log``, 3.1): times only in GPS records
 #: (3.0: ``Time``, the GPS time of week; 3.1: ``T``, since boot) and 3.1's IMU records.
+_INAV_FMT = "FMT, 17, 37, INAV, cccfffiiff, BAlt,IAlt,IClb,ACorrX,ACorrY,ACorrZ,GLat,GLng,ILat,ILng"
 _OLD_COPTER_FMT = {
     "3.0": [
+        _INAV_FMT,
         "FMT, 130, 35, GPS, BIBcLLeeEe, Status,Time,NSats,HDop,Lat,Lng,RelAlt,Alt,Spd,GCrs",
         "FMT, 4, 25, CTUN, hcefhhhhh, ThrIn,SonAlt,BarAlt,WPAlt,NavThr,AngBst,CRate,ThrOut,DCRate",
     ],
     "3.1": [
+        _INAV_FMT,
         "FMT, 130, 45, GPS, BIHBcLLeeEefI, "
         "Status,TimeMS,Week,NSats,HDop,Lat,Lng,RelAlt,Alt,Spd,GCrs,VZ,T",
         "FMT, 131, 31, IMU, Iffffff, TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ",
@@ -734,9 +738,9 @@ _OLD_COPTER_FMT = {
 
 def _old_copter_log(path: Path, version: str, start_ms: int) -> FloatArray:
     """A text log as Copter ``version`` writes it: 60 s at a 50 Hz loop from ``start_ms``, a
-    climb to 10 m from 20 s; GPS at 5 Hz, CTUN (the barometer, no time of its own) at 10 Hz,
-    3.1's IMU at 50 Hz, each record after the loop's first. Returns the CTUN records' true
-    times [s]."""
+    climb to 10 m from 20 s; GPS at 5 Hz, CTUN (the barometer) at 10 Hz, each followed by INAV
+    (the onboard estimate), neither with a time of its own, 3.1's IMU at 50 Hz. Returns the
+    CTUN records' true times [s]."""
     lines = ["FMT, 128, 89, FMT, BBnNZ, Type,Length,Name,Format", *_OLD_COPTER_FMT[version]]
     lines.append(f"MSG, ArduCopter V{version}.1")
     ctun = []
@@ -745,9 +749,10 @@ def _old_copter_log(path: Path, version: str, start_ms: int) -> FloatArray:
         height = float(np.clip((k - 1000) / 50.0, 0.0, 10.0))
         if version == "3.1":
             lines.append(f"IMU, {ms}, 0, 0, 0, 0, 0, -9.81")
+        inav = f"INAV, 0, {height:.2f}, 0, 0, 0, 0, 0, 0, 0, 0"
         if k % 10 == 5 or (version == "3.0" and k < 10 and k % 5 == 0):
             ctun.append(ms / 1e3)  # 3.0: two records before the first GPS record, untimed
-            lines.append(f"CTUN, 0, 0, {height:.2f}, 0, 0, 0, 0, 0, 0")
+            lines += [f"CTUN, 0, 0, {height:.2f}, 0, 0, 0, 0, 0, 0", inav]
         if k % 10 == 9:
             times = f"{ms % 604_800_000}" if version == "3.0" else f"{ms + 300}, 1774"
             lines.append(
@@ -755,7 +760,7 @@ def _old_copter_log(path: Path, version: str, start_ms: int) -> FloatArray:
                 "0, 0" + ("" if version == "3.0" else f", 0, {ms}")
             )
         elif version == "3.1" and k % 10 == 4:
-            lines.append(f"CTUN, 0, 0, {height:.2f}, 0, 0, 0, 0, 0, 0")
+            lines += [f"CTUN, 0, 0, {height:.2f}, 0, 0, 0, 0, 0, 0", inav]
             ctun.append(ms / 1e3)
     path.write_text("\n".join(lines) + "\n")
     return np.asarray(ctun)
@@ -783,10 +788,26 @@ def test_records_without_times_of_their_own_are_timed_by_their_place_among_those
     gps = next(s for s in log.sensors if s.kind == "gps")
     assert np.all(np.diff(gps.t) == pytest.approx(0.2))  # 3.0: on from 604800 s, one week on
     said = " ".join(log.notes)
-    assert "CTUN: no time of their own in this firmware" in said
+    assert "CTUN, INAV: no time of their own in this firmware" in said
     assert ("times are GPS.Time, the GPS time of week: this firmware logs no time" in said) == (
         version == "3.0"
     )
+
+
+def test_an_old_copters_inertial_navigation_is_its_onboard_estimate(tmp_path: Path) -> None:
+    """Copter up to 3.1 logs no EKF: its onboard height is INAV.IAlt (above home), read as a
+    reference and measured against where the log has no better."""
+    _old_copter_log(tmp_path / "old.log", "3.1", 60_000)
+    (inav,) = read_log(tmp_path / "old.log").references
+    assert (inav.name, inav.source, inav.datum) == (
+        "inav",
+        "INAV.IAlt",
+        "home (inertial navigation)",
+    )
+    assert np.ptp(inav.value) == pytest.approx(10.0)
+    report = evaluate(tmp_path / "old.log", ["support"])
+    assert report.truth.source == "INAV.IAlt"
+    assert report.rows[0].overall.rmse < 0.1
 
 
 def test_a_gps_time_of_0_times_nothing(tmp_path: Path) -> None:

@@ -237,7 +237,7 @@ def choose_truth(flight: FlightLog, referred: Referred, which: TruthChoice = "au
     refs = {r.name: r for r in flight.references}
     name = Path(flight.path).name
     candidates: tuple[tuple[str, Literal["sim", "ekf"]], ...] = (
-        ("sim", "sim"), ("ekf", "ekf"), ("ctun", "ekf"),
+        ("sim", "sim"), ("ekf", "ekf"), ("ctun", "ekf"), ("inav", "ekf"),
     )  # fmt: skip
     refused = ""
     for candidate, kind in candidates:
@@ -253,7 +253,8 @@ def choose_truth(flight: FlightLog, referred: Referred, which: TruthChoice = "au
     wanted = {
         "auto": "simulator truth or EKF estimate",
         "sim": "simulator truth (SIM, or PX4's groundtruth topics)",
-        "ekf": "EKF estimate (XKF1/NKF1, CTUN.Alt, or PX4's vehicle_global/local_position)",
+        "ekf": "EKF estimate (XKF1/NKF1, CTUN.Alt, INAV.IAlt, or PX4's vehicle_global/local_"
+        "position)",
     }[which]
     raise NoUsableSensorsError(
         f"{name}: no {wanted} to measure against" + (f"; {refused}" if refused else "")

@@ -76,7 +76,7 @@ log = logging.getLogger(__name__)
 _SENSOR_TYPES = ("GPS", "GPS2", "GPS3", "BARO", "BAR2", "BAR3", "RFND", "SONR", "CTUN")
 _OTHER_TYPES = (
     "IMU", "ATT", "XKF1", "NKF1", "ORGN", "AHR2", "POS", "SIM", "MSG", "VER", "FMTU", "PARM",
-    "VIBE", "STAT", "GPA", "GPA2", "GPA3", "EV",
+    "VIBE", "STAT", "GPA", "GPA2", "GPA3", "EV", "INAV",
 )  # fmt: skip
 WANTED_TYPES = frozenset(_SENSOR_TYPES + _OTHER_TYPES)
 #: The wanted types read as samples in time (the others are the log's text and parameters).
@@ -641,6 +641,8 @@ def _read_references(rec: _Records) -> list[Series]:
         _reference(rec, "ahrs2", "AHR2", "Alt", "AMSL"),
         _reference(rec, "pos", "POS", "Alt", "AMSL"),
         _reference(rec, "ctun", "CTUN", "Alt", "home"),
+        # Copter up to 3.1's onboard estimate, its inertial navigation (int16 cm: to 327 m)
+        _reference(rec, "inav", "INAV", "IAlt", "home (inertial navigation)"),
         _reference(rec, "sim", "SIM", "Alt", "AMSL (simulator truth)"),
     ]
     return [c for c in candidates if c is not None]
@@ -924,7 +926,7 @@ def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:
     vibration = _read_vibration(rec)
     rec.done("VIBE")
     references = _rejoin_resets(b, _read_references(rec), resets, takeoffs)
-    rec.done("XKF1", "NKF1", "ORGN", "AHR2", "POS", "CTUN", "SIM")
+    rec.done("XKF1", "NKF1", "ORGN", "AHR2", "POS", "CTUN", "INAV", "SIM")
     speed = _read_gps_field(rec, "Spd", b.not_converged)
     course = _read_gps_field(rec, "GCrs", b.not_converged)
     climb = _read_gps_field(rec, "VZ", b.not_converged, sign=-1.0)
