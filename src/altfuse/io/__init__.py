@@ -101,9 +101,10 @@ def _kind(path: Path, head: bytes) -> Kind:
     # before the DataFlash header is looked for: an archive may hold a log's bytes as they are
     archive = next((name for magic, name in _ARCHIVES.items() if head.startswith(magic)), None)
     if archive is not None or head[257:262] == b"ustar":
+        holds = _members(path) if archive == "zip" else ""
         raise LogReadError(
-            f"{path}: a {archive or 'tar'} archive{_members(path)}, not a log: extract the log "
-            "from it (altfuse reads one log compressed with gzip, bzip2 or xz as it is)"
+            f"{path}: a {archive or 'tar'} archive{holds}, not a log: extract the log from it "
+            "(altfuse reads one log compressed with gzip, bzip2 or xz as it is)"
         )
     if FMT_HEADER in head:
         return "dataflash"
@@ -123,8 +124,8 @@ def _kind(path: Path, head: bytes) -> Kind:
 
 
 def _members(path: Path, shown: int = 3) -> str:
-    """What a zip archive holds, for the refusal: its first ``shown`` files' names (nothing
-    for another archive, or a zip that does not open)."""
+    """What the zip archive ``path`` holds, for the refusal: its first ``shown`` files' names
+    (nothing for a zip that does not open)."""
     import zipfile  # only for this refusal
 
     try:

@@ -294,7 +294,6 @@ from altfuse.fuse.smoother.events import (
 from altfuse.fuse.smoother.evidence import (
     JUMP_TOGETHER_S,
     STABLE_GAIN,
-    THERMAL_GAIN,
     Made,
     drift_evidence,
     dynamic_evidence,
@@ -495,7 +494,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     layout, dynamic_gain, airspeed, wind, made = _dynamic(
         inputs, (physical, r, layout), ground, made
     )
-    layout, thermal_gain, made = thermal_evidence(physical, r, layout, kinds, made)
+    layout, thermal, made = thermal_evidence(physical, r, layout, kinds, made)
     layout, drifts = drift_evidence(ev, r, layout, kinds, made)
     del made, r, ground
     release_free_memory()  # the tests' passes, before the smoothing ones
@@ -544,12 +543,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             **({"baro_dynamic_speed": _SPEEDS[airspeed]} if layout.has("dynamic") else {}),
             **({} if wind is None else {"baro_dynamic_wind": f"{wind}, {_SMOOTHED_WIND}"}),
             **drifts,
-            **evidence_record(
-                "thermal",
-                layout.has("thermal"),
-                thermal_gain,
-                unwitnessed=thermal_gain > THERMAL_GAIN and not layout.has("thermal"),
-            ),
+            **thermal,
             **_fitted(names, ev, noise, layout, xs[-1]),
             **{f"q_terrain_{name}_m2_m": value for name, value in terrain.items()},
             # the GPS's vertical velocity: its samples fused, and refused by its heights' slope

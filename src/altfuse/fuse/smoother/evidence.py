@@ -327,9 +327,9 @@ def smoothed_wind(
 
 def thermal_evidence(
     physical: Events, r: FloatArray, layout: Layout, kinds: Sequence[str], made: Made | None
-) -> tuple[Layout, float, Made | None]:
+) -> tuple[Layout, dict[str, float | str], Made | None]:
     """``layout`` with the barometers' temperature coefficients where the log's evidence asks
-    for them, that evidence (the log-likelihood gain, NaN without a temperature), and the
+    for them, the test's record for the metadata (nothing without a temperature), and the
     forward pass of the layout chosen (``made`` without a temperature; ``made`` is also
     ``layout``'s where it is that pass).
 
@@ -344,7 +344,7 @@ def thermal_evidence(
     accelerometer's input on the clock), the two heights 0.5 m apart; without it, 0.09 m.
     """
     if not layout.has("thermal"):
-        return layout, math.nan, made
+        return layout, {}, made
     plain = layout.without("thermal")
     richer = _made_of(made, physical, layout)
     if richer is None:
@@ -352,9 +352,12 @@ def thermal_evidence(
     else:
         without = likelihood(physical, r, plain)
     gain = evidence_gain(without, richer)
-    if gain > THERMAL_GAIN and witnessed(richer, physical.who, kinds):
-        return layout, gain, Made(physical, layout, richer)
-    return plain, gain, Made(physical, plain, without)
+    asked = gain > THERMAL_GAIN
+    seen = witnessed(richer, physical.who, kinds)
+    record = evidence_record("thermal", asked and seen, gain, unwitnessed=asked and not seen)
+    if asked and seen:
+        return layout, record, Made(physical, layout, richer)
+    return plain, record, Made(physical, plain, without)
 
 
 def drift_evidence(
@@ -390,12 +393,10 @@ def drift_evidence(
     seen = witnessed(passes[0], ev.who, kinds)  # by the pass in which the barometers drift
     gps_heard = heard(stable, ev.who, receivers.drifting)
     modelled = _drift_kept(gain, rival, heard=gps_heard, witnessed=seen)
-    record = evidence_record("drift", modelled, gain)
+    record = evidence_record("drift", modelled, gain, unwitnessed=_drift_kept(gain) and not seen)
     if math.isfinite(rival):
         record["gps_drift_loglik_gain"] = rival  # the rival's, never modelled itself
-    if _drift_kept(gain) and not seen:
-        record["baro_drift"] = UNWITNESSED
-    elif _drift_kept(gain) and not modelled:
+    if _drift_kept(gain) and seen and not modelled:
         record["baro_drift"] = "not modelled (the GPS's own drift explains the log better)"
     return (drifting if modelled else layout), record
 
