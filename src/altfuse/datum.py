@@ -28,9 +28,10 @@ range against the GPS's own error, a value different from 1 and plausible; the m
 which, and why not. A drift in time is fitted beside it and left in the data, where fusion is
 meant to see it; a source that is right but offset keeps its full weight.
 
-The datum is found on a clock of :data:`DATUM_RATE_HZ` at least, whatever the output's rate
+The datum is found on a clock of :data:`DATUM_RATE_HZ`, whatever the output's rate
 (:func:`on_clock` refers the output's ticks with it): on a coarser clock the take-off and the
-ground before it blur into a few ticks, and the fused height moved with ``--rate``.
+ground before it blur into a few ticks, and the fused height moved with ``--rate``; on a finer
+one the ground window's medians and the scale fits moved too.
 
 Before that, :func:`tilt_correct` turns a rangefinder's distance along the body's down axis into a
 vertical height, ``d * cos(roll) * cos(pitch)``, with the logged attitude (``CTUN.SAlt`` comes
@@ -1254,6 +1255,12 @@ def referred_samples(sensors: Sequence[Series], referred: Referred) -> tuple[Sam
         value, keep = _referred_values(referred, o, s.t, s.value)
         out.append(Samples(*merge_duplicates(s.t[keep], value[keep])))
     return tuple(out)
+
+
+def on_datum_clock(rate_hz: float) -> bool:
+    """Whether a clock of ``rate_hz`` is the datum's (DATUM_RATE_HZ), within the rounding of a
+    rate read back from a clock's step (``1 / dt``)."""
+    return abs(rate_hz / DATUM_RATE_HZ - 1.0) <= 1e-9
 
 
 def coarser_than_datum(rate_hz: float) -> bool:

@@ -21,9 +21,9 @@ from altfuse.datum import (
     Segment,
     Track,
     Wind,
-    coarser_than_datum,
     detector_takeoffs,
     on_clock,
+    on_datum_clock,
     refer_to_takeoff,
     referred_samples,
     tilt_correct,
@@ -188,7 +188,7 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     sensors = [shift(s, lags[s.name]) if s.name in lags else s for s in sensors]
     aligned = align(sensors, options.rate_hz, options.max_gap_s, options.span)
     fine = aligned
-    if coarser_than_datum(options.rate_hz):
+    if not on_datum_clock(options.rate_hz):
         fine = align(sensors, DATUM_RATE_HZ, options.max_gap_s, options.span)
     aligned_at = time.perf_counter()
     referred = refer_to_takeoff(
