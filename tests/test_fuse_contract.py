@@ -3,6 +3,7 @@ method gets by being registered: its CLI options and these tests."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -138,6 +139,13 @@ def test_heights_the_methods_cannot_take_are_refused_in_words(
 ) -> None:
     with pytest.raises(ValueError, match=message):
         FusionInput.from_heights(z, **keywords)  # type: ignore[arg-type]
+
+
+def test_the_inputs_on_the_analysis_clock_are_of_the_same_sensors() -> None:
+    inputs = FusionInput.from_heights(np.zeros((10, 2)))
+    other = FusionInput.from_heights(np.zeros((5, 2)), 0.2, kinds=["gps", "gps"])
+    with pytest.raises(ValueError, match=r"analysis has sensors \('gps', 'gps2'\) for"):
+        dataclasses.replace(inputs, analysis=other)
 
 
 #: A new method as a contributor writes it: one module, one registry line.

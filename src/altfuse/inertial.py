@@ -50,6 +50,15 @@ class VerticalAcceleration:
     on_clock: FloatArray
     record: dict[str, Any]
 
+    def on(self, clock: FloatArray, rate_hz: float) -> VerticalAcceleration:
+        """The same samples, at-rest reading and record, averaged into another clock's cells
+        (``k / rate_hz``)."""
+        a_clock = on_clock(*self.samples, clock, rate_hz)
+        missing = int((~np.isfinite(a_clock)).sum())
+        return VerticalAcceleration(
+            self.samples, a_clock, {**self.record, "ticks_without_imu": missing}
+        )
+
 
 def referred_vertical_acceleration(
     imu: Imu, attitude: Attitude, clock: FloatArray, rate_hz: float, still_s: tuple[float, float]

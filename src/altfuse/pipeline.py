@@ -32,7 +32,11 @@ from altfuse.errors import NoUsableSensorsError, ParameterError, Refusal, Unsupp
 from altfuse.fuse import DEFAULT_METHOD, METHODS, FusionInput, FusionResult, Method, method
 from altfuse.fuse.base import Jump, own_jump
 from altfuse.guard import guard
-from altfuse.inertial import referred_vertical_acceleration, velocity_integral
+from altfuse.inertial import (
+    VerticalAcceleration,
+    referred_vertical_acceleration,
+    velocity_integral,
+)
 from altfuse.io import read_log
 from altfuse.memory import release_free_memory
 from altfuse.model import FlightLog, Samples, Series, brief_repr
@@ -152,6 +156,9 @@ class Prepared:
     referred: Referred
     dropped: dict[str, str]
     lags: dict[str, Lag]
+    #: The sources referred on the datum's clock (DATUM_RATE_HZ), where ``aligned``'s rate is
+    #: another: the clock the smoother decides its model on (:attr:`FusionInput.analysis`).
+    analysis: Referred | None = None
 
     def without_inertial(self) -> Prepared:
         """The same without the log's IMU and attitude records, once :func:`fusion_input` has
@@ -201,8 +208,9 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
         track=_track(flight),
         takeoffs=sorted((*flight.takeoffs, *detector_takeoffs(_samples(flight.landed)))),
     )
+    analysis = None
     if fine is not aligned:
-        referred = on_clock(referred, aligned, fine.rate_hz)
+        analysis, referred = referred, on_clock(referred, aligned, fine.rate_hz)
     log.info(
         "%s: aligned %d ticks in %.2f s, datum in %.2f s",
         name,
@@ -212,7 +220,7 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     )
     dropped.update(referred.dropped)
     _require_sensors(name, referred.names, options, dropped)
-    return Prepared(flight, sensors, aligned, referred, dropped, lags)
+    return Prepared(flight, sensors, aligned, referred, dropped, lags, analysis)
 
 
 def _lags(flight: FlightLog, sensors: list[Series]) -> dict[str, Lag]:
@@ -268,20 +276,23 @@ def _on_ground(referred: Referred) -> tuple[tuple[float, float], ...]:
 
 def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> FusionInput:
     """What the pipeline hands method ``chosen`` (named ``name`` in errors): the referred
-    sensors on the clock and their own samples, and from the log what it ``uses``.
+    sensors on the clock and their own samples, and from the log what it ``uses``; where the
+    clock is not the datum's, the same on the datum's clock too (:attr:`FusionInput.analysis`),
+    the accelerometer's at-rest reading taken there for both.
 
     Raises
     ------
     NoUsableSensorsError
         The method requires the vertical acceleration and the log has no IMU or ATT records.
     """
-    flight, referred = prepared.log, prepared.referred
+    flight, analysis = prepared.log, prepared.analysis
+    decided = prepared.referred if analysis is None else analysis
+    rate = prepared.aligned.rate_hz if analysis is None else DATUM_RATE_HZ
     accel = None
     if "accel" in chosen.uses and flight.imu is not None and flight.attitude is not None:
         accel = referred_vertical_acceleration(
-            flight.imu, flight.attitude, referred.t, prepared.aligned.rate_hz,
-            referred.ground_window_s,
-        )  # fmt: skip
+            flight.imu, flight.attitude, decided.t, rate, decided.ground_window_s
+        )
     if "accel" in chosen.requires and accel is None:
         missing = [n for n, v in (("IMU", flight.imu), ("ATT", flight.attitude)) if v is None]
         others = ", ".join(m for m, f in METHODS.items() if "accel" not in f.requires)
@@ -289,11 +300,24 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
             f"{Path(flight.path).name}: method {name!r} needs the accelerometer, and "
             f"the log has no {' or '.join(missing)} records; {others} work without it"
         )
+    inputs = _on_clock(prepared, decided, rate, accel)
+    if analysis is None:
+        return inputs
+    referred, rate = prepared.referred, prepared.aligned.rate_hz
+    output = None if accel is None else accel.on(referred.t, rate)
+    return replace(_on_clock(prepared, referred, rate, output), analysis=inputs)
+
+
+def _on_clock(
+    prepared: Prepared, referred: Referred, rate_hz: float, accel: VerticalAcceleration | None
+) -> FusionInput:
+    """The :class:`FusionInput` of ``referred``, on its clock of ``rate_hz``."""
+    flight = prepared.log
     temps = flight.temperatures
     velocity = _samples(flight.vertical_velocity)
     if velocity is not None and "gps" in prepared.lags:
         velocity = Samples(velocity.t - prepared.lags["gps"].lag_s, velocity.value)
-    dt = 1.0 / prepared.aligned.rate_hz
+    dt = 1.0 / rate_hz
     span = (referred.t[0] - dt, referred.t[-1] + dt)
     samples = tuple(_within(s, span) for s in referred_samples(prepared.sensors, referred))
     velocity = None if velocity is None else _within(velocity, span)

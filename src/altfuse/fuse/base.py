@@ -131,6 +131,10 @@ class FusionInput:
         As ``steps``, those found only across a gap of one sensor's, below
         :data:`altfuse.steps.STEP_SIGMAS` (:attr:`altfuse.steps.Step.tentative`): a jump where
         a method's evidence tells one from none.
+    analysis
+        The same inputs on the datum's clock (:data:`altfuse.datum.DATUM_RATE_HZ`), where ``t``
+        is another: a method that decides its model on clock ticks (the smoother) decides it
+        there, and its answer does not move with the output's rate; None on that clock.
     """
 
     __repr__ = brief_repr
@@ -156,6 +160,7 @@ class FusionInput:
     landed: Samples | None = None
     steps: tuple[Jump, ...] = ()
     tentative: tuple[Jump, ...] = ()
+    analysis: FusionInput | None = None
 
     def __post_init__(self) -> None:
         n = self.z.shape[1] if self.z.ndim == 2 else -1
@@ -173,6 +178,8 @@ class FusionInput:
         if self.accel is not None and self.accel.on_clock.shape != self.t.shape:
             shape = self.accel.on_clock.shape
             raise ValueError(f"accel has shape {shape} for a clock of {self.t.size} ticks")
+        if self.analysis is not None and self.analysis.names != self.names:
+            raise ValueError(f"analysis has sensors {self.analysis.names} for {self.names}")
 
     @property
     def speed(self) -> Samples | None:

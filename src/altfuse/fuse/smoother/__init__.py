@@ -290,6 +290,7 @@ from altfuse.fuse.smoother.events import (
     contributions,
     interval_mean,
     merge_events,
+    on_every_event,
 )
 from altfuse.fuse.smoother.evidence import (
     JUMP_TOGETHER_S,
@@ -448,51 +449,58 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     ``accel`` (None: the altitude-only random-walk model), ``track`` (the GPS's speed and
     course), ``wind`` (the datum's), ``temperatures`` (a barometer with them gets a temperature
     coefficient) and ``on_ground_s`` (there ``h = 0`` and ``v = 0``) when the log has them.
+    All of them but ``t`` from ``analysis`` where it is given: the model is decided on the
+    datum's clock, whatever the output's (at 20 Hz rather than 10, a 628 s copter log's
+    barometer drift was modelled or not, and its height moved by 0.15 m).
     """
-    names, kinds, samples = inputs.names, inputs.kinds, inputs.samples
+    clock, ticks = _clocks(inputs)
+    names, kinds, samples = clock.names, clock.kinds, clock.samples
     m = len(samples)
-    accel = None if inputs.accel is None else inputs.accel.samples
+    accel = None if clock.accel is None else clock.accel.samples
     use_imu = accel is not None and accel.t.size >= 2
     q_accel = Q_ACCEL_NO_IMU
     if params.accel_noise_m2_s3 is not None:
         q_accel = params.accel_noise_m2_s3
     elif use_imu and accel is not None:
         q_accel = accel_psd(*accel)
-    velocity, velocity_refused = checked_velocity(inputs)
-    times, who, values, position = merge_events(samples, inputs.t, velocity)
+    velocity, velocity_refused = checked_velocity(clock)
+    times, who, values, position = merge_events(samples, ticks, velocity)
+    # the events the model is decided on: the samples and the analysis clock's ticks (None:
+    # every event); the output's other ticks only read the state there
+    model = None if clock is inputs else ~((who == TICK) & ~np.isin(times, clock.t))
     # each sample's variance: the local noise of its sensor times a scale refined by EM
-    noise = measurement_noise(inputs, params.sigma_m, (who, position), velocity)
-    still = still_events(times, who, inputs.on_ground_s)
-    a, q_added = _accelerometer(inputs, times)
+    noise = measurement_noise(clock, params.sigma_m, (who, position), velocity)
+    still = still_events(times, who, clock.on_ground_s, model)
+    a, q_added = _accelerometer(clock, times, model)
     layout, ground = _layout(
-        inputs,
+        clock,
         (times, who, position),
         bool(still.any()),
         accel if use_imu else None,
         params.gps_correlation_s,
     )
-    q_events, terrain = state_noise(inputs, times, params.offset_noise_m2_s)
-    climb = None if inputs.landed is None else sensed_climb(inputs.t, inputs.z, inputs.dt_s)
-    landed = landed_events(times, who, inputs.landed, inputs.speed, climb) & ~still
+    q_events, terrain = state_noise(clock, times, params.offset_noise_m2_s)
+    climb = None if clock.landed is None else sensed_climb(clock.t, clock.z, clock.dt_s)
+    landed = landed_events(times, who, clock.landed, clock.speed, climb, model) & ~still
     ev = Events(
         times, who, values, a, q_events, still, q_accel + q_added, use_imu, params.gate_sigma,
         first_height(who, values),
-        landed, reset_events(times, inputs.splices),
+        landed, reset_events(times, clock.splices), model=model,
     )  # fmt: skip
     del position, q_added  # in the noises, the layout and the events now
     r = noise.r(who)  # before EM: the local noises as they are
-    steps, ev = _jumps(inputs, ev, r, layout)
-    ev, stable_gain, made = _gps_stability(inputs, (ev, steps), r, layout, params.offset_noise_m2_s)
+    steps, ev = _jumps(clock, ev, r, layout)
+    ev, stable_gain, made = _gps_stability(clock, (ev, steps), r, layout, params.offset_noise_m2_s)
     physical = ev
     if params.offset_noise_m2_s:
-        physical = replace(ev, q_state=with_jumps(state_noise(inputs, times, {})[0], steps, times))
+        physical = replace(ev, q_state=with_jumps(state_noise(clock, times, {})[0], steps, times))
     layout, scale_gain, ev, physical = relearnt_scales(
-        ev, physical, r, layout, inputs.scale_unknown, inputs.scale_known
+        ev, physical, r, layout, clock.scale_unknown, clock.scale_known
     )
     # each test hands on the forward pass of the model it chose (``made``), which the next
     # reads where it is its own model's (the same events and layout) rather than filter again
     layout, dynamic_gain, airspeed, wind, made = _dynamic(
-        inputs, (physical, r, layout), ground, made
+        clock, (physical, r, layout), ground, made
     )
     layout, thermal, made = thermal_evidence(physical, r, layout, kinds, made)
     layout, drifts = drift_evidence(ev, r, layout, kinds, made)
@@ -501,16 +509,18 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
     floor = ev.q_accel
     ev, out = _smoothed(ev, layout, noise, floor if params.accel_noise_m2_s3 is None else None)
 
-    xs, var_h, gain_h = out["x"], out["var_h"], out["gain_h"]  # the states at the ticks
+    # the states at the output's ticks (of the ticks of both clocks, where the model's are others)
+    at = slice(None) if clock is inputs else np.searchsorted(ticks, inputs.t)
+    xs, var_h, gain_h = out["x"][at], out["var_h"][at], out["gain_h"]
     series = [*enumerate(names)] + ([(VELOCITY, VELOCITY_NAME)] if velocity is not None else [])
     nis, rejected = _innovation_checks(out, who, series)
     # the barometers' scale error nothing in the log pins, as the smoothed height follows it
-    scales = unpinned_scales(kinds, inputs.scale_known, inputs.scale_unknown, layout)
+    scales = unpinned_scales(kinds, clock.scale_known, clock.scale_unknown, layout)
     if scales.any():
-        var_h = var_h + scale_response(ev, noise.r(who), layout, out["accepted"], scales) ** 2
+        var_h = var_h + scale_response(ev, noise.r(who), layout, out["accepted"], scales)[at] ** 2
     del out  # the events' states, before the result's arrays
     release_free_memory()
-    weights, valid = contributions((times, who, gain_h), inputs.z, inputs.dt_s)
+    weights, valid = contributions((times, who, gain_h), inputs.t, inputs.z, inputs.dt_s)
     n_valid = np.isfinite(inputs.z).sum(axis=1)
     status = np.where(n_valid == 1, SINGLE, np.where(valid, FUSED, NONE))
     return FusionResult(
@@ -529,7 +539,7 @@ def fuse_smoother(inputs: FusionInput, params: SmootherParams) -> FusionResult:
             "model": "accelerometer-driven" if use_imu else "altitude-only random walk (no IMU)",
             "accel_noise_m2_s3": q_accel,
             # held at v = 0 where the autopilot said it had landed [s]
-            "landed_held_s": float(landed.sum() * inputs.dt_s),
+            "landed_held_s": float(landed.sum() * clock.dt_s),
             # where the smoothed flight asked for more than the accelerometer's own noise [s]
             "accel_noise_raised_s": float(
                 np.diff(times, prepend=times[0])[ev.q_accel > floor].sum()
@@ -797,10 +807,25 @@ def model_check(nis: Mapping[str, float]) -> str:
     )
 
 
-def _accelerometer(inputs: FusionInput, times: FloatArray) -> tuple[FloatArray, FloatArray]:
+def _clocks(inputs: FusionInput) -> tuple[FusionInput, FloatArray]:
+    """The inputs the model is decided on (``inputs.analysis``, else ``inputs``) and the
+    ticks the filter steps through: theirs, and the output's among them."""
+    if inputs.analysis is None:
+        return inputs, inputs.t
+    return inputs.analysis, np.union1d(inputs.analysis.t, inputs.t)
+
+
+def _accelerometer(
+    inputs: FusionInput, times: FloatArray, model: np.ndarray | None
+) -> tuple[FloatArray, FloatArray]:
     """The mean vertical acceleration over each event interval (0 without the IMU), and the
     acceleration noise density [m^2/s^3] its spikes and the sensors' refusals add there
-    (without the IMU, the sensors' refusals of a constant velocity)."""
+    (without the IMU, the sensors' refusals of a constant velocity). Both over the intervals
+    between the ``model`` events (None: all), the others taking their interval's
+    (:func:`.events.model_intervals`)."""
+    if model is not None:
+        a, added = _accelerometer(inputs, times[model], None)
+        return on_every_event(a, model), on_every_event(added, model)
     vertical = inputs.accel
     on_clock = np.zeros(inputs.t.size) if vertical is None else np.nan_to_num(vertical.on_clock)
     added = interval_mean(Samples(inputs.t, accel_refused(inputs, on_clock)), times)

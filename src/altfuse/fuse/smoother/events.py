@@ -35,6 +35,24 @@ def merge_events(
     return t[order], who[order], np.concatenate(values)[order], np.concatenate(position)[order]
 
 
+def model_intervals(model: np.ndarray) -> np.ndarray:
+    """Per event, the event of ``model`` (a mask) whose interval, from the model event before
+    it, holds it: itself for a model event, else the next model event (the last one, after
+    them all). An output tick between two model events splits their interval and takes its
+    acceleration and noise densities: it moves no state."""
+    n = model.size
+    mine = np.where(model, np.arange(n), n)
+    following = np.minimum.accumulate(mine[::-1])[::-1]
+    last = int(np.flatnonzero(model)[-1]) if model.any() else n - 1
+    return np.asarray(np.where(following == n, last, following))
+
+
+def on_every_event(values: FloatArray, model: np.ndarray) -> FloatArray:
+    """``values``, one per event of ``model`` (a mask), given to every event: each other one
+    its interval's (:func:`model_intervals`)."""
+    return np.asarray(values[np.cumsum(model)[model_intervals(model)] - 1])
+
+
 def interval_mean(series: Samples, t: FloatArray) -> FloatArray:
     """The mean of a sampled signal over each interval between consecutive times ``t`` (the
     samples integrated exactly, trapezoids); NaN where ``t`` leaves the samples' span."""
@@ -51,12 +69,13 @@ def interval_mean(series: Samples, t: FloatArray) -> FloatArray:
 
 
 def contributions(
-    events: tuple[FloatArray, np.ndarray, FloatArray], z: FloatArray, dt_s: float
+    events: tuple[FloatArray, np.ndarray, FloatArray], ticks: FloatArray, z: FloatArray, dt_s: float
 ) -> tuple[FloatArray, np.ndarray]:
     """Each sensor's share per tick of the gain on h its accepted samples carried around the
     tick (summing to 1 over the sensors present at the tick), and which ticks have a sensor.
 
-    ``events`` are the events' times, series (:func:`merge_events`) and gains on h. The gains
+    ``events`` are the events' times, series (:func:`merge_events`) and gains on h; ``ticks``
+    and ``z`` the output's clock and the sensors' heights on it. The gains
     are summed under a triangle centred on the tick, its half-width the longest of the
     sensors' median sampling intervals (at least the tick ``dt_s``), so that each sensor's
     sum holds whole cycles of every other's: from the samples since the previous tick, a GPS
@@ -64,7 +83,6 @@ def contributions(
     sample and none at the others (on the shared logs the weights swung by more than 0.5 from
     one tick to the next on 56-99 % of the ticks of 17 logs of 34)."""
     times, who, gain_h = events
-    ticks = times[who == TICK]
     mine = [who == i for i in range(z.shape[1])]
     steps = [float(np.median(np.diff(times[m]))) for m in mine if m.sum() > 1]
     width = max([dt_s, *steps])

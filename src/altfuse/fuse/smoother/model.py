@@ -138,15 +138,20 @@ def datum_priors(
 
 
 def still_events(
-    times: FloatArray, who: np.ndarray, spans: Sequence[tuple[float, float]]
+    times: FloatArray,
+    who: np.ndarray,
+    spans: Sequence[tuple[float, float]],
+    model: np.ndarray | None = None,
 ) -> np.ndarray:
     """The clock ticks at which the vehicle stands at its take-off point (``spans``: the
-    datum's ground windows, one per segment of a spliced log with its own ground)."""
+    datum's ground windows, one per segment of a spliced log with its own ground); of the
+    ``model`` events alone where given (:attr:`Events.model`: as many holds at every output
+    rate)."""
     out = np.zeros(times.size, dtype=bool)
     for lo, hi in spans:
         out |= (times >= lo) & (times <= hi)
     out &= who == TICK
-    return out
+    return out if model is None else out & model
 
 
 def reset_events(times: FloatArray, splices: Sequence[tuple[float, bool]]) -> np.ndarray:
@@ -179,6 +184,7 @@ def landed_events(
     landed: Samples | None,
     speed: Samples | None,
     climb: Samples | None = None,
+    model: np.ndarray | None = None,
 ) -> np.ndarray:
     """The clock ticks at which the vehicle stands on the ground by the autopilot's own land
     detector (``landed``: PX4's ``vehicle_land_detected``, ArduPilot's ``STAT.isFlying``), each
@@ -189,7 +195,8 @@ def landed_events(
     sloping field climbs with it). There the smoother holds v = 0. A span in which the
     sensors climb or sink that fast (``climb``: :func:`sensed_climb`) is no landing at all: a
     detector can say landed in the air (Copter 3.4's did in a 10 m/s descent, its motors at
-    their lower limit), and a descent held at v = 0 ends metres off every sensor.
+    their lower limit), and a descent held at v = 0 ends metres off every sensor. Of the
+    ``model`` events alone where given (:func:`still_events`).
 
     With the margin at the log's own ends too, two PX4 simulator logs standing on the ground
     throughout had their first and last 2 s free: the height sloped 4 cm there in an 11 s log
@@ -215,7 +222,7 @@ def landed_events(
         order = np.argsort(speed.t, kind="stable")
         rolling = np.interp(times, speed.t[order], speed.value[order]) > GROUND_MAX_SPEED_M_S
         out &= ~rolling
-    return out
+    return out if model is None else out & model
 
 
 def sensed_climb(t: FloatArray, z: FloatArray, dt_s: float) -> Samples:
@@ -455,7 +462,10 @@ class Events:
     ``still`` (v = 0 alone; None: none); ``reset``: the first event of each segment of a
     spliced log, the row of :func:`reset_states` that returns to the prior there (0 elsewhere;
     None: none); ``early``: the samples at which the height is let loose where they fail the
-    gate (the first rejection of an episode a pass before let loose later; None: none).
+    gate (the first rejection of an episode a pass before let loose later; None: none);
+    ``model``: the events the model is decided on, the samples and the ticks of the clock it
+    is decided on, where the output's clock is another (None: every event); each other event
+    is a tick of the output's that splits an interval and reads the state there.
     """
 
     t: FloatArray
@@ -471,6 +481,7 @@ class Events:
     landed: np.ndarray | None = None
     reset: np.ndarray | None = None
     early: np.ndarray | None = None
+    model: np.ndarray | None = None
 
 
 @compiled

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from altfuse.fuse.smoother.compiled import compiled
-from altfuse.fuse.smoother.events import TICK
+from altfuse.fuse.smoother.events import TICK, model_intervals
 from altfuse.fuse.smoother.kalman import (
     Transition,
     adjoint_predict,
@@ -239,9 +239,14 @@ def _dynamics(
 ) -> tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray]:
     """The events' accelerations and process-noise densities, and F's structure
     (:data:`.model.Structure`) and its entries off the diagonal, as the kernels take them."""
-    q_state = np.ascontiguousarray(ev.q_state, dtype=np.float64)
+    a, q_accel, q_state = ev.a, ev.q_accel, ev.q_state
+    if ev.model is not None:  # an event of the output's clock alone: its model interval's
+        at = model_intervals(ev.model)
+        a, q_accel = a[at], q_accel[at]
+        q_state = q_state if q_state.shape[0] == 1 else q_state[at]
+    q_state = np.ascontiguousarray(q_state, dtype=np.float64)
     structure = layout.structure(ev.use_bias)
-    return ev.a, ev.q_accel, q_state, structure, couplings(ev.use_bias, structure[1])
+    return a, q_accel, q_state, structure, couplings(ev.use_bias, structure[1])
 
 
 #: A filter's whole state between two events (:func:`_carry`): ``x``, ``P``, per state its
