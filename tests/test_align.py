@@ -105,6 +105,23 @@ def test_ticks_fall_on_round_times_of_the_log_clock() -> None:
     np.testing.assert_array_equal(out.t * 4.0, np.round(out.t * 4.0))
 
 
+@pytest.mark.parametrize("rate_hz", [0.1, 0.05])
+def test_on_a_slow_clock_a_sensor_s_cells_next_to_each_other_are_no_gap(rate_hz: float) -> None:
+    """A 10 Hz barometer at 0.1 Hz: its cells' means lie a tick apart, to the jitter of its
+    stamps, above the longest gap a sensor's own interval bridges (10 s). Each one a hair over
+    it broke the column, and its ticks came and went."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 400.0, 0.1) + rng.uniform(-2e-4, 2e-4, 4000)
+    out = align([series("baro", t, np.ones(t.size))], rate_hz=rate_hz)
+    inside = (out.t > 0.5 / rate_hz) & (out.t < 400.0 - 0.5 / rate_hz)
+    assert inside.sum() >= 400.0 * rate_hz - 2
+    assert np.isfinite(out.z[inside, 0]).all()
+    # an empty cell is a gap still
+    gap = (t < 100.0) | (t > 100.0 + 2.5 / rate_hz)
+    out = align([series("baro", t[gap], np.ones(gap.sum()))], rate_hz=rate_hz)
+    assert np.isnan(out.z[(out.t > 100.0 + 0.5 / rate_hz) & (out.t < 100.0 + 2 / rate_hz), 0]).all()
+
+
 def test_disjoint_sensors_have_no_overlap() -> None:
     a = series("baro", np.arange(0.0, 5.0, 0.1), np.ones(50))
     b = series("gps", np.arange(10.0, 15.0, 0.2), np.ones(25), kind="gps")

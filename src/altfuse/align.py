@@ -112,7 +112,11 @@ def cell_means(t: FloatArray, v: FloatArray, rate_hz: float) -> tuple[FloatArray
 OWN_INTERVALS = 1.5
 #: ... up to this [s]: the "interval" of a GPS with two samples 7 hours apart (a damaged log's
 #: stamps) bridged the 7 hours, a column the guard measured the fused value against: the
-#: smoother 1815 m off with its fused_std 27 km, unflagged, status single.
+#: smoother 1815 m off with its fused_std 27 km, unflagged, status single. The clock's own
+#: tick times OWN_INTERVALS is never a gap either: two cells' means next to each other are a
+#: tick apart. At 0.1 Hz a 10 Hz barometer's cells lay 9.99995-10.00005 s apart, and every one
+#: over 10 s broke its column: its ticks came and went (diaven's GPS was left alone at one,
+#: 4.9 m from the fused height, which the guard flagged).
 MAX_OWN_GAP_S = 10.0
 
 
@@ -128,7 +132,7 @@ def resample(
     out = np.full(grid.shape, np.nan)
     if t.size > 1:
         own = OWN_INTERVALS * float(np.median(np.diff(t)))
-        max_gap_s = max(max_gap_s, min(own, MAX_OWN_GAP_S))
+        max_gap_s = max(max_gap_s, min(own, MAX_OWN_GAP_S), OWN_INTERVALS / rate_hz)
     breaks = np.flatnonzero(np.diff(t) > max_gap_s) + 1
     segments = np.split(np.arange(t.size), breaks)
     half_cell = 0.5 / rate_hz
