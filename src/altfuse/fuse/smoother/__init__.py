@@ -222,6 +222,13 @@ where 6, 5, 6 and 2 before the jumps settled and their sensors were told by thei
 (9 at 10 m before a tie of drifts went to the barometer, :func:`.evidence.drift_evidence`);
 the logs without a step unchanged.
 
+The model is decided on the datum's 10 Hz clock whatever the output's rate
+(``FusionInput.analysis``): the noises, the tests, the accelerometer's refusals and the holds on
+the ground; the filter steps through the output's ticks too, each splitting the interval it
+falls in and taking that interval's acceleration and noise (:func:`.events.model_intervals`),
+so that it reads the state there and moves none (at 0.2-100 Hz the heights of 33 of 34 logs
+within 0.11 mm of their 10 Hz ones, where they moved by up to 1.4 m, 8.8 m in a crash).
+
 Outputs: the smoothed height at the clock's ticks, its standard deviation (``fused_std``: the
 model's, and the sensors' common latency behind the log's timestamps, ``TIMING_SIGMA_S``, times
 the smoothed climb rate; also the barometers' scale error that nothing pins,
