@@ -22,11 +22,13 @@ from typing import Any
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 from pymavlink import mavutil
 
+from altfuse.cli import cli
 from altfuse.errors import LogReadError
 from altfuse.evaluation import evaluate
-from altfuse.io import read_log
+from altfuse.io import dataflash, read_log
 from altfuse.io.dataflash import RESET_MAX, _Records, rejoined
 from altfuse.io.dataflash_writer import DataFlashWriter
 from altfuse.io.fastdf import index_file
@@ -222,6 +224,66 @@ def test_a_log_that_ends_inside_a_record_has_no_skipped_bytes(
     assert [s.value.size for s in flight.sensors] == [
         s.value.size for s in read_log(SAMPLE_LOG).sensors
     ]
+
+
+@pytest.mark.parametrize("appended", [["hover.bin"], ["mission.bin", "hover.bin"]])
+def test_a_log_with_another_appended_is_read_up_to_the_other(
+    tmp_path: Path, appended: list[str]
+) -> None:
+    """Two logs joined in one file (``cat a.bin b.bin``): the second's clock starts again at its
+    own boot. Its samples behind the first's latest time were dropped as out of order, and the
+    rest spliced on: mission.bin with hover.bin after it fused 14,326 samples dropped as
+    implausible and 60 s of hover after the mission, 425 ticks flagged 50.9 m off. The first
+    is read alone, as from its own file, and the rest is said."""
+    path = tmp_path / "joined.bin"
+    path.write_bytes(
+        b"".join((SAMPLE_LOG.parent / n).read_bytes() for n in ["mission.bin", *appended])
+    )
+    flight, alone = read_log(path), read_log(SAMPLE_LOG)
+    first = SAMPLE_LOG.stat().st_size
+    assert flight.damaged == (
+        f"another log is appended from byte {first:,} ({path.stat().st_size - first:,} bytes; its "
+        "clock starts again at 30.0 s, where this one's had reached 149.9 s): the first alone "
+        "is read; cut the file there to fuse the other",
+    )
+    assert flight.size_bytes == path.stat().st_size
+    assert flight.skipped_bytes == 0
+    assert flight.record_counts == alone.record_counts
+    for ours, its in zip(flight.sensors, alone.sensors, strict=True):
+        np.testing.assert_array_equal(ours.t, its.t)
+        np.testing.assert_array_equal(ours.value, its.value)
+    shown = CliRunner().invoke(cli, ["info", str(path)])
+    assert f"\ndamaged: {flight.damaged[0]}\n" in shown.output
+
+
+@pytest.mark.parametrize(
+    ("records", "shift_s"),
+    [(slice(300, 301), -50.0), (slice(300, 301), 3600.0), (slice(None), 100_000.0)],
+    ids=["one-stamp-behind", "one-stamp-ahead", "another-time-base"],
+)
+def test_a_clock_falling_back_without_a_new_log_is_none(
+    tmp_path: Path, records: slice, shift_s: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One GPS record stamped 50 s early (damage) falls back once, and the clock runs on; one
+    an hour late leaves every later record behind it, but not behind those before it; a GPS
+    whose every stamp is on another base (a time of week, 100,000 s ahead) puts every other
+    type's next record behind it, but its own next record is not: no log begins there. Each is
+    told by the records after the fall (RESTART_RECORDS) and, with one record alone, by each
+    type's first after it."""
+    index = index_file(SAMPLE_LOG)
+    gps = next(t for t, f in index.formats.items() if f.name == "GPS")
+    data = bytearray(SAMPLE_LOG.read_bytes())
+    for record in index.offsets[index.types == gps][records].tolist():
+        at = int(record) + 3  # its TimeUS, after the header
+        stamp = int.from_bytes(data[at : at + 8], "little")
+        data[at : at + 8] = (stamp + round(shift_s * 1e6)).to_bytes(8, "little")
+    path = tmp_path / "stamps.bin"
+    path.write_bytes(bytes(data))
+    for _ in range(2):
+        flight = read_log(path)
+        assert flight.damaged == ()
+        assert flight.record_counts == read_log(SAMPLE_LOG).record_counts
+        monkeypatch.setattr(dataflash, "RESTART_RECORDS", 1)
 
 
 def test_a_rangefinder_s_valid_readings_count_in_runs_of_three() -> None:

@@ -52,7 +52,7 @@ import numpy.typing as npt
 from altfuse.errors import LogReadError
 from altfuse.io import hashing
 from altfuse.io.fastdf import Format, Index, _text, index_file
-from altfuse.io.framing import FORMAT_TO_STRUCT, HEADER
+from altfuse.io.framing import FMT_TYPE, FORMAT_TO_STRUCT, HEADER
 from altfuse.metrics import mad_sigma
 from altfuse.model import (
     DOWNWARD,
@@ -138,6 +138,15 @@ def _scaled(values: npt.NDArray[Any], char: str) -> FloatArray:
 
 #: A GPS week [s]: Copter up to 3.0 logs no time but its GPS records' time of week.
 GPS_WEEK_S = 7 * 86400.0
+#: Another log appended to the first (two files joined: ``cat a.bin b.bin``) starts its clock
+#: again at its own boot: the clock's records fall back by more than RESTART_BACK_S from the
+#: time the RESTART_BEFORE records before reached (their median: a lone stamp hours ahead is
+#: no time reached), each type's first after that point too, and stay behind it for
+#: RESTART_RECORDS records (or to the end). A stamp damaged alone falls back once, or leaps
+#: ahead once (the screen drops it); a log's clocks never run back.
+RESTART_BACK_S = 10.0
+RESTART_BEFORE = 5
+RESTART_RECORDS = 50
 
 
 def across_weeks(t: FloatArray) -> FloatArray:
@@ -239,6 +248,39 @@ class _Records:
             t[types == self.formats[name].type_id] = self.times(name)
         at = np.flatnonzero(t > 0)
         return at, t[at]
+
+    @cached_property
+    def restart(self) -> tuple[int, float, float] | None:
+        """Where another log begins, appended to this one (:data:`RESTART_BACK_S`): its place
+        in the chain of records (its first FMT record after the first log's last record of the
+        :attr:`clock`, else its first record of the clock), the first log's latest time and
+        the other's first [s]; None where none does."""
+        if not any(self._falls_back(name) for name in self.clock):
+            return None  # (the chain's times below are the file's records' count of floats)
+        at, t = self._ticks
+        types = self.index.types[at]
+        for k in np.flatnonzero(t[1:] < t[:-1] - RESTART_BACK_S) + 1:
+            # the time reached: the records' before it (a lone stamp ahead of them is none)
+            reached = float(np.median(t[max(0, k - RESTART_BEFORE) : k]))
+            # every type's clock starts again there: its first record after it falls back too
+            _, first = np.unique(types[k:], return_index=True)
+            again = (t[k + first] < reached - RESTART_BACK_S).all()
+            if again and (t[k : k + RESTART_RECORDS] < reached).all():
+                first, its = at[k - 1] + 1, at[k]
+                header = np.flatnonzero(self.index.types[first:its] == FMT_TYPE)
+                place = int(first + header[0]) if header.size else int(its)
+                return place, reached, float(t[k])
+        return None
+
+    def _falls_back(self, type_name: str) -> bool:
+        """Whether the times of a type with a time field fall back by more than
+        RESTART_BACK_S somewhere: read from its records and let go (each clock type's kept at
+        once put the 300 MB log's peak 20 MB higher)."""
+        found = self.time_field(type_name)
+        if found is None:
+            return False
+        t = self.table(type_name)[found[0]] / found[1]
+        return t.size > 1 and bool(np.any(t[1:] < np.fmax.accumulate(t)[:-1] - RESTART_BACK_S))
 
     def time_field(self, type_name: str) -> tuple[str, float] | None:
         """The field that holds a record's time since boot, and its units per second.
@@ -843,7 +885,9 @@ def _skipped(index: Index, notes: list[str]) -> int:
     record it ends inside (the end of nearly every log) or erased flash after its last record
     (a log read off a flash chip), each said in ``notes``."""
     cut = erased = 0
-    if index.cut_at is not None:
+    if index.appended_at is not None:  # said as damage (read_dataflash)
+        erased = index.size - index.appended_at
+    elif index.cut_at is not None:
         cut = index.size - index.cut_at
         what = f"{counted(cut, 'byte')} of its header"
         if cut >= HEADER:
@@ -897,9 +941,27 @@ def read_dataflash(path: str | Path) -> FlightLog:
     with hashing(path) as digest:
         try:
             rec = _Records(index_file(path))
+            said = _appended(rec)
+            if rec.restart is not None:  # the first log alone: the other's clock is its own
+                rec = _Records(rec.index.before(rec.restart[0]))
         except OSError as exc:
             raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
-        return _flight(path, rec, digest)
+        flight = _flight(path, rec, digest)
+    return flight if said is None else replace(flight, damaged=(*flight.damaged, said))
+
+
+def _appended(rec: _Records) -> str | None:
+    """What the log says of another log appended to it (:attr:`_Records.restart`); None
+    where none is."""
+    if rec.restart is None:
+        return None
+    place, reached, again = rec.restart
+    at = int(rec.index.offsets[place])
+    return (
+        f"another log is appended from byte {at:,} ({rec.index.size - at:,} bytes; "
+        f"its clock starts again at {again:.1f} s, where this one's had reached {reached:.1f} "
+        "s): the first alone is read; cut the file there to fuse the other"
+    )
 
 
 def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:

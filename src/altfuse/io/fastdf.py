@@ -122,8 +122,9 @@ class Format:
 @dataclass
 class Index:
     """Where the records are: offsets and type ids of the chain, the formats, where the record
-    the file ends inside begins (None where it ends between records), and where erased flash
-    after the last record begins (None where there is none)."""
+    the file ends inside begins (None where it ends between records), where erased flash
+    after the last record begins (None where there is none), and where another log appended
+    to this one begins (None: none, or not looked for: :meth:`before`)."""
 
     data: npt.NDArray[np.uint8]
     offsets: npt.NDArray[np.integer[Any]]
@@ -133,6 +134,19 @@ class Index:
     mapped: mmap.mmap | None = field(default=None, repr=False)  # the mapping ``data`` views
     cut_at: int | None = None
     erased_at: int | None = None
+    appended_at: int | None = None  # where another log, appended to this one, begins
+
+    def before(self, k: int) -> Index:
+        """The chain up to its ``k``-th record, where another log appended to this one begins
+        (``appended_at``, its byte): the rest is that log's."""
+        return replace(
+            self,
+            offsets=self.offsets[:k],
+            types=self.types[:k],
+            cut_at=None,
+            erased_at=None,
+            appended_at=int(self.offsets[k]),
+        )
 
     @cached_property
     def per_type(self) -> npt.NDArray[np.int64]:
