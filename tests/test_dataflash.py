@@ -244,7 +244,7 @@ def test_a_log_with_another_appended_is_read_up_to_the_other(
     assert flight.damaged == (
         f"another log is appended from byte {first:,} ({path.stat().st_size - first:,} bytes; its "
         "clock starts again at 30.0 s, where this one's had reached 149.9 s): the first alone "
-        "is read; cut the file there to fuse the other",
+        "is read; to fuse the other, cut the file there",
     )
     assert flight.size_bytes == path.stat().st_size
     assert flight.skipped_bytes == 0
@@ -254,6 +254,19 @@ def test_a_log_with_another_appended_is_read_up_to_the_other(
         np.testing.assert_array_equal(ours.value, its.value)
     shown = CliRunner().invoke(cli, ["info", str(path)])
     assert f"\ndamaged: {flight.damaged[0]}\n" in shown.output
+
+
+def test_a_decoded_log_with_another_appended_says_no_byte_of_its_file(tmp_path: Path) -> None:
+    """Compressed (or a text log, converted), the joined logs' bytes are not the file's: the
+    warning says where the other log begins by its clock alone."""
+    path = tmp_path / "joined.bin.gz"
+    joined = SAMPLE_LOG.read_bytes() + (SAMPLE_LOG.parent / "hover.bin").read_bytes()
+    path.write_bytes(gzip.compress(joined))
+    assert read_log(path).damaged == (
+        "another log is appended (its clock starts again at 30.0 s, where this one's had "
+        "reached 149.9 s): the first alone is read; to fuse the other, split the file where "
+        "it begins",
+    )
 
 
 @pytest.mark.parametrize(

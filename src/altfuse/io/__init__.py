@@ -76,8 +76,10 @@ def read_log(path: str | Path) -> FlightLog:
     return _read_as(path, _kind(path, _head(path)))
 
 
-def _read_as(path: Path, kind: Kind) -> FlightLog:
-    """The log at ``path``, read as what its first bytes say it is (:func:`_kind`)."""
+def _read_as(path: Path, kind: Kind, decoded: bool = False) -> FlightLog:
+    """The log at ``path``, read as what its first bytes say it is (:func:`_kind`);
+    ``decoded``: it is another file's decoded form (decompressed, a text log converted), whose
+    bytes are not that file's."""
     if isinstance(kind, Compression):
         return _read_compressed(path, kind)
     if kind == "ulog":
@@ -88,7 +90,7 @@ def _read_as(path: Path, kind: Kind) -> FlightLog:
         return _read_text(path)
     from altfuse.io.dataflash import read_dataflash
 
-    return read_dataflash(path)
+    return read_dataflash(path, decoded=decoded)
 
 
 def _kind(path: Path, head: bytes) -> Kind:
@@ -238,7 +240,7 @@ def _read_through(
         with path.open("rb") as raw:
             hashed = _Hashed(raw)
             with through(cast(IO[bytes], io.BufferedReader(hashed))) as stream:
-                flight = _read_copied(path, stream, source)
+                flight = _read_copied(path, stream, source, decoded=True)
             hashed.drain()
     except OSError as exc:
         raise LogReadError(f"{path}: cannot {verb} ({exc.strerror or exc})") from exc
@@ -271,9 +273,12 @@ def _refuse_terminal(path: Path, stream: IO[bytes]) -> None:
         )
 
 
-def _read_copied(path: Path, stream: io.BufferedIOBase, source: str) -> FlightLog:
-    """The log in ``stream`` (from ``source``: a compression, a pipe), copied into a temporary
-    file (the readers map a file) and read from it; its path ``path``, the copy noted. A stream
+def _read_copied(
+    path: Path, stream: io.BufferedIOBase, source: str, decoded: bool = False
+) -> FlightLog:
+    """The log in ``stream`` (from ``source``: a compression, a pipe; ``decoded``: not the
+    file's own bytes), copied into a temporary file (the readers map a file) and read from it;
+    its path ``path``, the copy noted. A stream
     that ends early or goes bad is read as far as it came (as a log cut short is), the damage
     said; one that gives nothing, or whose first bytes are no log's (``/dev/zero``), is not a
     log, and is not copied on."""
@@ -295,7 +300,7 @@ def _read_copied(path: Path, stream: io.BufferedIOBase, source: str) -> FlightLo
         if not head:
             raise LogReadError(f"{path}: nothing came from {source}")
         try:
-            flight = _read_as(copy, _kind(path, head) if kind is None else kind)
+            flight = _read_as(copy, _kind(path, head) if kind is None else kind, decoded)
         except AltfuseError as exc:  # said of the log given, not of its copy
             exc.args = (str(exc).replace(str(copy), str(path)), *exc.args[1:])
             raise

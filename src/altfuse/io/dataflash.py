@@ -929,8 +929,9 @@ def _note_clock(b: _Builder) -> None:
         )
 
 
-def read_dataflash(path: str | Path) -> FlightLog:
-    """Read the altitude sources, IMU, attitude and references from a DataFlash log.
+def read_dataflash(path: str | Path, decoded: bool = False) -> FlightLog:
+    """Read the altitude sources, IMU, attitude and references from a DataFlash log
+    (``decoded``: another file's decoded form, whose bytes are not that file's).
 
     Raises
     ------
@@ -941,7 +942,7 @@ def read_dataflash(path: str | Path) -> FlightLog:
     with hashing(path) as digest:
         try:
             rec = _Records(index_file(path))
-            said = _appended(rec)
+            said = _appended(rec, decoded)
             if rec.restart is not None:  # the first log alone: the other's clock is its own
                 rec = _Records(rec.index.before(rec.restart[0]))
         except OSError as exc:
@@ -950,17 +951,23 @@ def read_dataflash(path: str | Path) -> FlightLog:
     return flight if said is None else replace(flight, damaged=(*flight.damaged, said))
 
 
-def _appended(rec: _Records) -> str | None:
-    """What the log says of another log appended to it (:attr:`_Records.restart`); None
-    where none is."""
+def _appended(rec: _Records, decoded: bool) -> str | None:
+    """What the log says of another log appended to it (:attr:`_Records.restart`): where it
+    begins, by its byte where the file is the log itself (not ``decoded``); None where none
+    is."""
     if rec.restart is None:
         return None
     place, reached, again = rec.restart
     at = int(rec.index.offsets[place])
+    clock = f"its clock starts again at {again:.1f} s, where this one's had reached {reached:.1f} s"
+    if decoded:
+        return (
+            f"another log is appended ({clock}): the first alone is read; to fuse the other, "
+            "split the file where it begins"
+        )
     return (
-        f"another log is appended from byte {at:,} ({rec.index.size - at:,} bytes; "
-        f"its clock starts again at {again:.1f} s, where this one's had reached {reached:.1f} "
-        "s): the first alone is read; cut the file there to fuse the other"
+        f"another log is appended from byte {at:,} ({rec.index.size - at:,} bytes; {clock}): "
+        "the first alone is read; to fuse the other, cut the file there"
     )
 
 
