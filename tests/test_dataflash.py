@@ -269,6 +269,20 @@ def test_a_decoded_log_with_another_appended_says_no_byte_of_its_file(tmp_path: 
     )
 
 
+def test_a_block_of_records_written_twice_is_no_other_log(tmp_path: Path) -> None:
+    """24 s of a log's records written again after themselves fall back as an appended log's
+    would, and stay behind for thousands of records; but no log's header (FMT) begins them:
+    the log is read to its end."""
+    index = index_file(SAMPLE_LOG)
+    data = SAMPLE_LOG.read_bytes()
+    lo, hi = (int(index.offsets[round(index.offsets.size * f)]) for f in (0.4, 0.6))
+    path = tmp_path / "twice.bin"
+    path.write_bytes(data[:hi] + data[lo:hi] + data[hi:])
+    flight, alone = read_log(path), read_log(SAMPLE_LOG)
+    assert flight.damaged == ()
+    assert [s.t.max() for s in flight.sensors] == [s.t.max() for s in alone.sensors]
+
+
 @pytest.mark.parametrize(
     ("records", "shift_s"),
     [(slice(300, 301), -50.0), (slice(300, 301), 3600.0), (slice(None), 100_000.0)],

@@ -142,8 +142,9 @@ GPS_WEEK_S = 7 * 86400.0
 #: again at its own boot: the clock's records fall back by more than RESTART_BACK_S from the
 #: time the RESTART_BEFORE records before reached (their median: a lone stamp hours ahead is
 #: no time reached), each type's first after that point too, and stay behind it for
-#: RESTART_RECORDS records (or to the end). A stamp damaged alone falls back once, or leaps
-#: ahead once (the screen drops it); a log's clocks never run back.
+#: RESTART_RECORDS records (or to the end), with FMT records (its header) since the first
+#: log's last. A stamp damaged alone falls back once, or leaps ahead once (the screen drops
+#: it); a block of records written twice has no header; a log's clocks never run back.
 RESTART_BACK_S = 10.0
 RESTART_BEFORE = 5
 RESTART_RECORDS = 50
@@ -252,9 +253,9 @@ class _Records:
     @cached_property
     def restart(self) -> tuple[int, float, float] | None:
         """Where another log begins, appended to this one (:data:`RESTART_BACK_S`): its place
-        in the chain of records (its first FMT record after the first log's last record of the
-        :attr:`clock`, else its first record of the clock), the first log's latest time and
-        the other's first [s]; None where none does."""
+        in the chain of records (its header's first FMT record, after the first log's last
+        record of the :attr:`clock`), the time the first log had reached and the other's
+        first [s]; None where none does."""
         if not any(self._falls_back(name) for name in self.clock):
             return None  # (the chain's times below are the file's records' count of floats)
         at, t = self._ticks
@@ -265,11 +266,11 @@ class _Records:
             # every type's clock starts again there: its first record after it falls back too
             _, first = np.unique(types[k:], return_index=True)
             again = (t[k + first] < reached - RESTART_BACK_S).all()
-            if again and (t[k : k + RESTART_RECORDS] < reached).all():
-                first, its = at[k - 1] + 1, at[k]
-                header = np.flatnonzero(self.index.types[first:its] == FMT_TYPE)
-                place = int(first + header[0]) if header.size else int(its)
-                return place, reached, float(t[k])
+            # and a log's header before it (a block of records written twice has none)
+            first, its = at[k - 1] + 1, at[k]
+            header = np.flatnonzero(self.index.types[first:its] == FMT_TYPE)
+            if again and header.size and (t[k : k + RESTART_RECORDS] < reached).all():
+                return int(first + header[0]), reached, float(t[k])
         return None
 
     def _falls_back(self, type_name: str) -> bool:
