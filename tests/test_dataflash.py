@@ -252,8 +252,9 @@ def test_a_log_with_another_appended_is_read_up_to_the_other(
     for ours, its in zip(flight.sensors, alone.sensors, strict=True):
         np.testing.assert_array_equal(ours.t, its.t)
         np.testing.assert_array_equal(ours.value, its.value)
+    assert flight.notes[-1] == flight.damaged[0]  # in the sidecar and the batch's count too
     shown = CliRunner().invoke(cli, ["info", str(path)])
-    assert f"\ndamaged: {flight.damaged[0]}\n" in shown.output
+    assert f"\nnote: {flight.damaged[0]}" in shown.output
 
 
 def test_a_decoded_log_with_another_appended_says_no_byte_of_its_file(tmp_path: Path) -> None:

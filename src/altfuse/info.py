@@ -158,7 +158,6 @@ def as_text(summary: dict[str, Any]) -> list[str]:
         f"IMU: {imu['samples'] if imu else 'no'} samples; "
         f"attitude: {att['samples'] if att else 'no'} samples",
         f"skipped bytes: {summary['skipped_bytes']}",
-        *[f"damaged: {line}" for line in summary["damaged"]],
         f"dropped samples: {summary['samples_dropped_total']} of the altitude sources "
         f"({of_sensors} implausible; the others filtered by the reader or beyond a "
         "rangefinder's range: each source's line)",

@@ -949,7 +949,9 @@ def read_dataflash(path: str | Path, decoded: bool = False) -> FlightLog:
         except OSError as exc:
             raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
         flight = _flight(path, rec, digest)
-    return flight if said is None else replace(flight, damaged=(*flight.damaged, said))
+    if said is None:
+        return flight
+    return replace(flight, notes=(*flight.notes, said), damaged=(*flight.damaged, said))
 
 
 def _appended(rec: _Records, decoded: bool) -> str | None:
