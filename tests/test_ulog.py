@@ -3,6 +3,8 @@ refused in one line, the simulator's truth checked before it is used."""
 
 from __future__ import annotations
 
+import gzip
+import io
 import re
 import struct
 import subprocess
@@ -21,7 +23,7 @@ from accuracy import verdict
 from altfuse.cli import cli
 from altfuse.errors import NoUsableSensorsError
 from altfuse.evaluation import evaluate, evaluate_prepared
-from altfuse.io import read_log
+from altfuse.io import read_log, ulog
 from altfuse.io.ulog import TOPICS, pressure_altitude
 from altfuse.model import Attitude, Series
 from altfuse.pipeline import FuseOptions, fuse_log, prepare, run_method
@@ -137,6 +139,43 @@ def test_every_extracted_value_is_pyulog_s(name: str) -> None:
     assert att.quaternion is not None
     q = np.column_stack([topics["vehicle_attitude"][0][f"q[{i}]"].astype(float) for i in range(4)])
     np.testing.assert_allclose(att.quaternion, q / np.linalg.norm(q, axis=1, keepdims=True))
+
+
+@pytest.mark.parametrize("compressed", [False, True], ids=["plain", "gzip"])
+def test_a_ulog_with_another_appended_is_read_up_to_the_other(
+    tmp_path: Path, compressed: bool
+) -> None:
+    """Two ULogs joined in one file: pyulog read on into the second's messages as damage, its
+    barometer samples behind the first's time dropped as out of order (1,988 of them) and the
+    fused height 561 m off. The first is read as from its own file, and where the second
+    begins is said: by its byte where the file is the log itself."""
+    first = shared_log("px4/px4_sitl_yuneec_position.ulg")
+    joined = first.read_bytes() + shared_log("px4/px4_sitl_yuneec_parameterchange.ulg").read_bytes()
+    path = tmp_path / ("joined.ulg.gz" if compressed else "joined.ulg")
+    path.write_bytes(gzip.compress(joined) if compressed else joined)
+    flight, alone = read_log(path), read_log(first)
+    size = first.stat().st_size
+    where = "" if compressed else f" from byte {size:,} ({len(joined) - size:,} bytes)"
+    how = "split the file where it begins" if compressed else "cut the file there"
+    said = f"another log is appended{where}: the first alone is read; to fuse the other, {how}"
+    assert flight.damaged == (said,)
+    assert said in flight.notes
+    assert flight.record_counts == alone.record_counts
+    for ours, its in zip(flight.sensors, alone.sensors, strict=True):
+        np.testing.assert_array_equal(ours.value, its.value)
+
+
+def test_another_ulog_s_header_is_found_across_the_chunks_read(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    header = b"ULog\x01\x12\x35"
+    data = header + b"x" * 100 + header + b"y" * 50
+    for chunk in range(1, 130):
+        monkeypatch.setattr(ulog, "_SEARCH_CHUNK", chunk)
+        handle = io.BytesIO(data)
+        assert ulog._appended_at(handle) == 107
+        assert handle.tell() == 0
+    assert ulog._appended_at(io.BytesIO(header + b"x" * 100)) is None
 
 
 def test_a_pressure_becomes_the_standard_atmosphere_s_height() -> None:

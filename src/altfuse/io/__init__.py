@@ -50,6 +50,21 @@ def sha256_of(path: Path) -> str:
     return digest.hexdigest()
 
 
+def appended_log(byte: int | None, size: int, clock: str = "") -> str:
+    """The line a reader says of another log appended to the one it read (two files joined:
+    ``cat a.bin b.bin``): where it begins, by its ``byte`` of the file's ``size`` (None: the
+    file is another's decoded form, whose bytes are not the file's) and by ``clock`` (what
+    the clocks say there, where the reader knows), and how to fuse it."""
+    parts = [] if byte is None else [f"{size - byte:,} bytes"]
+    told = "; ".join([*parts, clock] if clock else parts)
+    where = "" if byte is None else f" from byte {byte:,}"
+    how = "split the file where it begins" if byte is None else "cut the file there"
+    return (
+        f"another log is appended{where}{f' ({told})' if told else ''}: the first alone is "
+        f"read; to fuse the other, {how}"
+    )
+
+
 @contextlib.contextmanager
 def hashing(path: Path) -> Iterator[Future[str]]:
     """The file's sha256, computed in a thread while a reader reads the file (hashlib lets go
@@ -85,7 +100,7 @@ def _read_as(path: Path, kind: Kind, decoded: bool = False) -> FlightLog:
     if kind == "ulog":
         from altfuse.io.ulog import read_ulog
 
-        return read_ulog(path)
+        return read_ulog(path, decoded=decoded)
     if kind == "dataflash-text":
         return _read_text(path)
     from altfuse.io.dataflash import read_dataflash

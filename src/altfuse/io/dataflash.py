@@ -50,7 +50,7 @@ import numpy as np
 import numpy.typing as npt
 
 from altfuse.errors import LogReadError
-from altfuse.io import hashing
+from altfuse.io import appended_log, hashing
 from altfuse.io.fastdf import Format, Index, _text, index_file
 from altfuse.io.framing import FMT_TYPE, FORMAT_TO_STRUCT, HEADER
 from altfuse.metrics import mad_sigma
@@ -955,23 +955,14 @@ def read_dataflash(path: str | Path, decoded: bool = False) -> FlightLog:
 
 
 def _appended(rec: _Records, decoded: bool) -> str | None:
-    """What the log says of another log appended to it (:attr:`_Records.restart`): where it
-    begins, by its byte where the file is the log itself (not ``decoded``); None where none
-    is."""
+    """What the log says of another log appended to it (:attr:`_Records.restart`); None
+    where none is."""
     if rec.restart is None:
         return None
     place, reached, again = rec.restart
-    at = int(rec.index.offsets[place])
+    at = None if decoded else int(rec.index.offsets[place])
     clock = f"its clock starts again at {again:.1f} s, where this one's had reached {reached:.1f} s"
-    if decoded:
-        return (
-            f"another log is appended ({clock}): the first alone is read; to fuse the other, "
-            "split the file where it begins"
-        )
-    return (
-        f"another log is appended from byte {at:,} ({rec.index.size - at:,} bytes; {clock}): "
-        "the first alone is read; to fuse the other, cut the file there"
-    )
+    return appended_log(at, rec.index.size, clock)
 
 
 def _flight(path: Path, rec: _Records, digest: Future[str]) -> FlightLog:

@@ -45,6 +45,7 @@ from typing import Any, BinaryIO
 import numpy as np
 
 from altfuse.errors import LogReadError
+from altfuse.io import ULOG_MAGIC, appended_log
 from altfuse.model import (
     DOWNWARD,
     Attitude,
@@ -112,8 +113,9 @@ class _Topics:
         return np.asarray(stamp / 1e6 - self.start_s)
 
 
-def read_ulog(path: str | Path) -> FlightLog:
-    """Read the altitude sources, IMU, attitude and references from a ULog file.
+def read_ulog(path: str | Path, decoded: bool = False) -> FlightLog:
+    """Read the altitude sources, IMU, attitude and references from a ULog file (``decoded``:
+    another file's decoded form, whose bytes are not that file's).
 
     Raises
     ------
@@ -124,10 +126,12 @@ def read_ulog(path: str | Path) -> FlightLog:
 
     path = Path(path)
     with hashing(path) as digest:
-        ulog, printed = _parse(path)
+        ulog, printed, end = _parse(path)
         sha256 = digest.result()
     corrupt = "corrupt: pyulog skipped the data it could not parse (read up to the rest)"
     damaged: tuple[str, ...] = (corrupt,) if ulog.file_corruption else ()
+    if end is not None:
+        damaged += (appended_log(None if decoded else end, path.stat().st_size),)
     notes = [*damaged, *(f"pyulog: {line}" for line in printed)]
     topics = _Topics()
     if ulog.start_timestamp / 1e6 > MAX_BOOT_S:  # a simulator logging the wall clock
@@ -201,9 +205,15 @@ class _Bounded:
     the parse past ``END_REWINDS`` steps back from the file's end. Its reads are the file's
     own (a counted read cost 17 % of a 49 MB ULog's read time); only a seek is watched."""
 
-    def __init__(self, handle: BinaryIO, size: int) -> None:
+    def __init__(self, handle: BinaryIO, size: int, end: int | None = None) -> None:
         self._handle, self._size, self._left = handle, size, END_REWINDS
         self.read, self.tell, self.close = handle.read, handle.tell, handle.close
+        if end is not None:  # another log after ``end``: the file ends there for pyulog
+            self._size, self.read = end, self._read_to_end
+
+    def _read_to_end(self, n: int = -1) -> bytes:
+        left = max(self._size - self._handle.tell(), 0)
+        return self._handle.read(left if n is None or n < 0 else min(n, left))
 
     def seek(self, offset: int, whence: int = 0) -> int:
         if whence == 1 and offset < 0 and self._handle.tell() >= self._size:
@@ -216,22 +226,52 @@ class _Bounded:
         return self._handle.seek(offset, whence)
 
 
-def _parse(path: Path) -> tuple[Any, list[str]]:
-    """pyulog's decoding of the topics altfuse reads, and what it printed meanwhile (its
-    warnings on a corrupt file go to standard output, where a CSV may be going)."""
+def _parse(path: Path) -> tuple[Any, list[str], int | None]:
+    """pyulog's decoding of the topics altfuse reads, what it printed meanwhile (its warnings
+    on a corrupt file go to standard output, where a CSV may be going), and where another log
+    appended to this one begins (:func:`_appended_at`), None where none does: the first is
+    read alone. Joined, pyulog read on into the other's messages as damage: two PX4 simulator
+    logs one after the other put 1,988 barometer samples out of order and the fused height
+    561 m off."""
     from pyulog import ULog
 
     captured = io.StringIO()
     try:  # the file opened here: pyulog leaves its own handle open when it raises
         with path.open("rb") as handle, contextlib.redirect_stdout(captured):
             size = os.fstat(handle.fileno()).st_size
-            ulog = ULog(_Bounded(handle, size), list(TOPICS))
+            end = _appended_at(handle)
+            ulog = ULog(_Bounded(handle, size, end), list(TOPICS))
     except OSError as exc:
         raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
     except Exception as exc:  # pyulog raises what its parsing meets (struct.error, ...)
         raise LogReadError(f"{path}: not a readable ULog file ({exc})") from exc
     printed = [line.strip() for line in captured.getvalue().splitlines() if line.strip()]
-    return ulog, sorted(set(printed), key=printed.index)
+    return ulog, sorted(set(printed), key=printed.index), end
+
+
+#: The bytes read at a time looking for another log's header (:func:`_appended_at`).
+_SEARCH_CHUNK = 1 << 22
+
+
+def _appended_at(handle: BinaryIO) -> int | None:
+    """Where another ULog's header (its magic bytes) begins in the file, after its own; None
+    where none does (seven given bytes: never by chance in the 12 shared PX4 logs). Read a
+    chunk at a time, and the handle put back at the file's start: a mapping of the whole file
+    would count it all in the process's memory."""
+    at, tail = 1, len(ULOG_MAGIC) - 1
+    handle.seek(at)
+    try:
+        while chunk := handle.read(max(_SEARCH_CHUNK, len(ULOG_MAGIC))):
+            found = chunk.find(ULOG_MAGIC)
+            if found >= 0:
+                return at + found
+            if len(chunk) < len(ULOG_MAGIC):  # the file's last bytes: no header there
+                return None
+            at += len(chunk) - tail  # a header across two chunks: read its start again
+            handle.seek(at)
+        return None
+    finally:
+        handle.seek(0)
 
 
 @dataclass
