@@ -293,10 +293,9 @@ def _read_copied(
 ) -> FlightLog:
     """The log in ``stream`` (from ``source``: a compression, a pipe; ``decoded``: not the
     file's own bytes), copied into a temporary file (the readers map a file) and read from it;
-    its path ``path``, the copy noted. A stream
-    that ends early or goes bad is read as far as it came (as a log cut short is), the damage
-    said; one that gives nothing, or whose first bytes are no log's (``/dev/zero``), is not a
-    log, and is not copied on."""
+    its path ``path``, the copy noted. A stream that ends early or goes bad is read as far as
+    it came (as a log cut short is), the damage said; one that gives nothing, or whose first
+    bytes are no log's (``/dev/zero``), is not a log, and is not copied on."""
     with tempfile.TemporaryDirectory(prefix="altfuse-") as folder:
         copy = Path(folder) / (path.with_suffix("").name or "log")
         cut, head, kind = "", b"", None

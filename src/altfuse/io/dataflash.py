@@ -264,13 +264,13 @@ class _Records:
             # the time reached: the records' before it (a lone stamp ahead of them is none)
             reached = float(np.median(t[max(0, k - RESTART_BEFORE) : k]))
             # every type's clock starts again there: its first record after it falls back too
-            _, first = np.unique(types[k:], return_index=True)
-            again = (t[k + first] < reached - RESTART_BACK_S).all()
+            _, firsts = np.unique(types[k:], return_index=True)
+            again = (t[k + firsts] < reached - RESTART_BACK_S).all()
             # and a log's header before it (a block of records written twice has none)
-            first, its = at[k - 1] + 1, at[k]
-            header = np.flatnonzero(self.index.types[first:its] == FMT_TYPE)
+            since, until = at[k - 1] + 1, at[k]
+            header = np.flatnonzero(self.index.types[since:until] == FMT_TYPE)
             if again and header.size and (t[k : k + RESTART_RECORDS] < reached).all():
-                return int(first + header[0]), reached, float(t[k])
+                return int(since + header[0]), reached, float(t[k])
         return None
 
     def _falls_back(self, type_name: str) -> bool:
@@ -885,9 +885,9 @@ def _skipped(index: Index, notes: list[str]) -> int:
     """The bytes of ``index``'s file in no record, less those where its writing stopped: the
     record it ends inside (the end of nearly every log) or erased flash after its last record
     (a log read off a flash chip), each said in ``notes``."""
-    cut = erased = 0
-    if index.appended_at is not None:  # said as damage (read_dataflash)
-        erased = index.size - index.appended_at
+    cut = erased = appended = 0
+    if index.appended_at is not None:  # another log's: said as damage (read_dataflash)
+        appended = index.size - index.appended_at
     elif index.cut_at is not None:
         cut = index.size - index.cut_at
         what = f"{counted(cut, 'byte')} of its header"
@@ -901,7 +901,7 @@ def _skipped(index: Index, notes: list[str]) -> int:
             f"the log ends in {counted(erased, 'byte')} of erased flash (0xFF) after its last "
             "record: read off a flash chip"
         )
-    skipped = index.size - index.decoded_bytes - cut - erased
+    skipped = index.size - index.decoded_bytes - cut - erased - appended
     if skipped:
         notes.append(f"{counted(skipped, 'byte')} not part of any decodable record")
     return skipped

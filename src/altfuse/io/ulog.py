@@ -203,7 +203,8 @@ class _Endless(Exception):
 class _Bounded:
     """A binary file as pyulog reads it (``read``, ``seek``, ``tell``, ``close``), that stops
     the parse past ``END_REWINDS`` steps back from the file's end. Its reads are the file's
-    own (a counted read cost 17 % of a 49 MB ULog's read time); only a seek is watched."""
+    own (a counted read cost 17 % of a 49 MB ULog's read time); only a seek is watched. Where
+    another log follows at ``end``, its reads end there (counted: a joined file alone)."""
 
     def __init__(self, handle: BinaryIO, size: int, end: int | None = None) -> None:
         self._handle, self._size, self._left = handle, size, END_REWINDS
