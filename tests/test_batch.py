@@ -40,7 +40,7 @@ from altfuse.errors import LogReadError, ParameterError
 from altfuse.evaluation import evaluate
 from altfuse.fuse.support import SupportParams
 from altfuse.pipeline import FuseOptions
-from conftest import ROOT, shared_log
+from conftest import ROOT, SAMPLE_LOG, shared_log
 
 SAMPLES = ROOT / "sample_logs"
 #: The test clusters' HTTP server on a free port: ``dashboard_address=None`` still listens on
@@ -69,9 +69,9 @@ def test_batch_over_the_shared_logs_refuses_the_unfusable_and_exits_0(tmp_path: 
     assert result.exit_code == 0, result.output
     # no progress bar when stderr is not a terminal; one line on the log that needs a look
     assert result.stderr == (
-        "altfuse: warning: 1 log of the 8 fused needs a look (the summary's left_out, diverged "
-        "and model_check columns): rima48_test_cascade.BIN (diverged on 2 ticks, model check "
-        "failed)\n"
+        "altfuse: warning: 1 log of the 8 fused needs a look (the summary's left_out, damaged, "
+        "diverged and model_check columns): rima48_test_cascade.BIN (diverged on 2 ticks, model "
+        "check failed)\n"
     )
     summary = pd.read_csv(out / "summary.csv", keep_default_na=False)
     assert len(summary) == 11
@@ -170,7 +170,7 @@ def test_the_logs_that_need_a_look_are_named_in_one_line() -> None:
         LogResult("i.bin", "skipped"),
         LogResult("j.bin", "ok", left_out="gps gps2", model_check="passed"),
     ]
-    said = "need a look (the summary's left_out, diverged and model_check columns): "
+    said = "need a look (the summary's left_out, damaged, diverged and model_check columns): "
     assert doubted(results) == (
         f"5 logs of the 7 fused {said}b.ulg (model check failed); d.bin (diverged on 3 ticks, "
         "model check failed); e.bin (diverged on 12 ticks); and 2 more"
@@ -182,6 +182,32 @@ def test_the_logs_that_need_a_look_are_named_in_one_line() -> None:
         f"1 log of the 2 fused {said.replace('need', 'needs', 1)}f.bin (diverged on 1 tick)"
     )
     assert doubted([results[1], results[5], *results[6:9]]) is None
+    damaged = LogResult("k.bin", "ok", damaged="another log is appended", diverged=2)
+    assert doubted([damaged]) == (
+        f"1 log of the 1 fused {said.replace('need', 'needs', 1)}k.bin (damaged, diverged on "
+        "2 ticks)"
+    )
+
+
+def test_a_log_with_another_appended_is_named_as_damaged(tmp_path: Path) -> None:
+    """The summary's row of a file holding two logs says so (``damaged``), its sidecar too,
+    and the batch's last line names it among those that need a look."""
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "joined.bin").write_bytes(
+        SAMPLE_LOG.read_bytes() + (ROOT / "sample_logs" / "hover.bin").read_bytes()
+    )
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["batch", str(logs), "-o", str(out), "--jobs", "1"])
+    assert result.exit_code == 0, result.output
+    assert "needs a look" in result.stderr
+    assert "joined.bin (damaged)" in result.stderr
+    row = pd.read_csv(out / "summary.csv", keep_default_na=False).iloc[0]
+    said = json.loads((out / "joined.meta.json").read_text())["input"]["damaged"]
+    assert len(said) == 1
+    assert said[0].startswith("another log is appended from byte 311,792")
+    assert row.damaged == said[0]
+    assert row.notes >= 1
 
 
 def test_values_for_sensors_logs_lack_are_said_once_per_set() -> None:

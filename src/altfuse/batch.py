@@ -161,6 +161,7 @@ class LogResult:
     left_out: str = ""  # the sources with samples the datum could not refer (fuse warns)
     samples: int = 0  # ticks of the clock
     notes: int = 0  # the reader's notes on the log (damage, types not read, stuck runs)
+    damaged: str = ""  # the reader's damage, as fuse warns of it ("; " between two)
     skipped_bytes: int = 0  # bytes not part of any decodable record
     takeoff_found: bool | None = None
     fused_share: float | None = None  # of the ticks, those with a fused value
@@ -173,8 +174,10 @@ class LogResult:
 
     def doubts(self) -> list[str]:
         """What puts this log's fused altitude in question, as ``fuse`` warns of it: sensors
-        left out, the ticks the guard flagged, the model's own check failed."""
+        left out, damage the reader met (a corrupt ULog, another log appended), the ticks the
+        guard flagged, the model's own check failed."""
         found = [f"{self.left_out} left out"] if self.left_out else []
+        found += ["damaged"] if self.damaged else []
         found += [f"diverged on {counted(self.diverged, 'tick')}"] if self.diverged else []
         return found + (["model check failed"] if self.model_check.startswith("failed") else [])
 
@@ -194,8 +197,8 @@ def doubted(results: Sequence[LogResult]) -> str | None:
         return None
     return (
         f"{counted(len(named), 'log')} of the {len(fused)} fused "
-        f"{'needs' if len(named) == 1 else 'need'} a look (the summary's left_out, diverged and "
-        f"model_check columns): {_first_three(named, '; ', '; ')}"
+        f"{'needs' if len(named) == 1 else 'need'} a look (the summary's left_out, damaged, "
+        f"diverged and model_check columns): {_first_three(named, '; ', '; ')}"
     )
 
 
@@ -245,6 +248,7 @@ def _described(name: str, done: FileRun, seconds: float) -> LogResult:
         left_out=" ".join(run.referred.dropped),
         samples=int(run.referred.t.size),
         notes=len(record["input"]["notes"]),
+        damaged="; ".join(record["input"]["damaged"]),
         skipped_bytes=int(record["input"]["skipped_bytes"]),
         takeoff_found=record["datum"]["takeoff_s"] is not None,
         fused_share=round(valued / ticks, 4),

@@ -508,6 +508,7 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
             "reader": flight.reader,
             "skipped_bytes": flight.skipped_bytes,
             "notes": list(flight.notes),
+            "damaged": list(flight.damaged),
         },
         "method": result.method,
         "parameters": result.params,
