@@ -61,7 +61,12 @@ class FuseOptions:
     method: str = DEFAULT_METHOD
     params: Mapping[str, Params] | Params = field(default_factory=dict)
     rate_hz: float = param(
-        10.0, help="rate of the common clock", unit="Hz", check="positive", maximum=1000.0
+        10.0,
+        help="rate of the common clock, the output's (the datum and the smoother's model are "
+        "found on a 10 Hz clock at every rate)",
+        unit="Hz",
+        check="positive",
+        maximum=1000.0,
     )
     max_gap_s: float = param(
         1.0,
