@@ -270,6 +270,27 @@ def test_a_decoded_log_with_another_appended_says_no_byte_of_its_file(tmp_path: 
     )
 
 
+def test_a_time_field_declared_as_text_is_looked_at_for_another_log_as_read(
+    tmp_path: Path,
+) -> None:
+    """The look for another log appended read a type's time field as it is stored: one
+    declared as text (``n``, damage) raised TypeError, a traceback. It reads it as the reader
+    does: no number, said."""
+    path = tmp_path / "text_time.bin"
+    with path.open("wb") as handle:
+        writer = DataFlashWriter(handle)
+        writer.define("GPS", "nBff", "TimeMS,Status,Alt,Spd", "s-m-", "F---")
+        writer.define("BARO", "IffB", "TimeMS,Alt,Temp,Health", "sm--", "F---")
+        for k in range(300):
+            writer.write("BARO", 100_000 + 100 * k, 1.0, 30.0, 1)
+            if k % 2 == 0:
+                writer.write("GPS", b"abcd", 3, 100.0, 0.0)
+    flight = read_log(path)
+    assert [s.name for s in flight.sensors] == ["baro"]
+    assert "GPS.TimeMS: not read: declared as text ('n'), not a number" in flight.notes
+    assert flight.damaged == ()
+
+
 def test_a_block_of_records_written_twice_is_no_other_log(tmp_path: Path) -> None:
     """24 s of a log's records written again after themselves fall back as an appended log's
     would, and stay behind for thousands of records; but no log's header (FMT) begins them:

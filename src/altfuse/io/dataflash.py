@@ -274,14 +274,21 @@ class _Records:
         return None
 
     def _falls_back(self, type_name: str) -> bool:
-        """Whether the times of a type with a time field fall back by more than
+        """Whether the times of a type of the :attr:`clock` fall back by more than
         RESTART_BACK_S somewhere: read from its records and let go (each clock type's kept at
         once put the 300 MB log's peak 20 MB higher)."""
+        t = self._own_times(type_name, kept=False)
+        return t.size > 1 and bool(np.any(t[1:] < np.fmax.accumulate(t)[:-1] - RESTART_BACK_S))
+
+    def _own_times(self, type_name: str, kept: bool = True) -> FloatArray:
+        """The times [s] of a type with a time field (:meth:`time_field`), from that field;
+        its values ``kept`` for the next to ask (:meth:`raw`), or read and let go."""
         found = self.time_field(type_name)
         if found is None:
-            return False
-        t = self.table(type_name)[found[0]] / found[1]
-        return t.size > 1 and bool(np.any(t[1:] < np.fmax.accumulate(t)[:-1] - RESTART_BACK_S))
+            raise KeyError(f"{type_name} has no time field")
+        name, per_second = found
+        t = (self.raw if kept else self._decoded)(type_name, name) / per_second
+        return across_weeks(t) if name == "Time" else t
 
     def time_field(self, type_name: str) -> tuple[str, float] | None:
         """The field that holds a record's time since boot, and its units per second.
@@ -309,13 +316,16 @@ class _Records:
         per column (each instance of a type asks for its times again). Do not modify it."""
         key = (type_name, col)
         if key not in self._raw:
-            char = self.format_char(type_name, col)
-            if char in _NOT_NUMBERS:  # a number declared as text: no number to read
-                self.problems[f"{type_name}.{col}"] = f"declared as text ({char!r}), not a number"
-                self._raw[key] = np.full(self.n(type_name), np.nan)
-            else:
-                self._raw[key] = _scaled(self.table(type_name)[col], char)
+            self._raw[key] = self._decoded(type_name, col)
         return self._raw[key]
+
+    def _decoded(self, type_name: str, col: str) -> FloatArray:
+        """:meth:`raw`, decoded now and not kept."""
+        char = self.format_char(type_name, col)
+        if char in _NOT_NUMBERS:  # a number declared as text: no number to read
+            self.problems[f"{type_name}.{col}"] = f"declared as text ({char!r}), not a number"
+            return np.full(self.n(type_name), np.nan)
+        return _scaled(self.table(type_name)[col], char)
 
     def format_char(self, type_name: str, col: str) -> str:
         fmt = self.formats[type_name]
@@ -342,11 +352,8 @@ class _Records:
         time (pymavlink's reader gives such a record the time of the record before it, in a 3.1
         log without IMU records up to 0.2 s early); before the first, NaN. Do not modify it."""
         if type_name not in self._times:
-            found = self.time_field(type_name)
-            if found is not None:
-                name, per_second = found
-                t = self.raw(type_name, name) / per_second
-                self._times[type_name] = across_weeks(t) if name == "Time" else t
+            if self.time_field(type_name) is not None:
+                self._times[type_name] = self._own_times(type_name)
             elif self.clock:
                 at = np.flatnonzero(self.index.types == self.formats[type_name].type_id)
                 self._times[type_name] = np.interp(at, *self._ticks, left=np.nan)
