@@ -233,21 +233,35 @@ def _parse(path: Path) -> tuple[Any, list[str], int | None]:
     appended to this one begins (:func:`_appended_at`), None where none does: the first is
     read alone. Joined, pyulog read on into the other's messages as damage: two PX4 simulator
     logs one after the other put 1,988 barometer samples out of order and the fused height
-    561 m off."""
+    561 m off. It flags every such file corrupt (the 90 pairs of the shared PX4 logs that
+    fuse), so only a corrupt one is searched for the other's header and parsed again: the
+    others are read once."""
+    ulog, printed = _parsed(path)
+    if not ulog.file_corruption:
+        return ulog, printed, None
+    try:
+        with path.open("rb") as handle:
+            end = _appended_at(handle)
+    except OSError as exc:
+        raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
+    return (ulog, printed, None) if end is None else (*_parsed(path, end), end)
+
+
+def _parsed(path: Path, end: int | None = None) -> tuple[Any, list[str]]:
+    """pyulog's decoding of the file up to ``end`` (None: all of it), and what it printed."""
     from pyulog import ULog
 
     captured = io.StringIO()
     try:  # the file opened here: pyulog leaves its own handle open when it raises
         with path.open("rb") as handle, contextlib.redirect_stdout(captured):
             size = os.fstat(handle.fileno()).st_size
-            end = _appended_at(handle)
             ulog = ULog(_Bounded(handle, size, end), list(TOPICS))
     except OSError as exc:
         raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
     except Exception as exc:  # pyulog raises what its parsing meets (struct.error, ...)
         raise LogReadError(f"{path}: not a readable ULog file ({exc})") from exc
     printed = [line.strip() for line in captured.getvalue().splitlines() if line.strip()]
-    return ulog, sorted(set(printed), key=printed.index), end
+    return ulog, sorted(set(printed), key=printed.index)
 
 
 #: The bytes read at a time looking for another log's header (:func:`_appended_at`).
