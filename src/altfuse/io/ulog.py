@@ -233,9 +233,9 @@ def _parse(path: Path) -> tuple[Any, list[str], int | None]:
     appended to this one begins (:func:`_appended_at`), None where none does: the first is
     read alone. Joined, pyulog read on into the other's messages as damage: two PX4 simulator
     logs one after the other put 1,988 barometer samples out of order and the fused height
-    561 m off. It flags every such file corrupt (the 90 pairs of the shared PX4 logs that
-    fuse), so only a corrupt one is searched for the other's header and parsed again: the
-    others are read once."""
+    561 m off. It flags every such file corrupt (the 90 pairs of the 10 shared PX4 logs not
+    corrupt already), so only a corrupt one is searched for the other's header and parsed again:
+    the others are read once."""
     ulog, printed = _parsed(path)
     if not ulog.file_corruption:
         return ulog, printed, None
