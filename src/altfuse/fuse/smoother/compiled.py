@@ -1,7 +1,8 @@
 """The smoother's loops compiled by numba: a Python loop over a flight's events cost 138 us
 an event (benchmarks/smoother_bench.py); compiled, with its steps in place, a few.
 
-:func:`compiled` is :func:`altfuse.compiled.compiled` (``numba.njit``, cached on disk).
+:func:`compiled`, :func:`compiled_loop` and :func:`compiled_step` are
+:mod:`altfuse.compiled`'s (``numba.njit``, cached on disk).
 
 numba keys a cached function on its own source file only: a kernel in ``passes.py`` compiled
 with the steps of ``kalman.py`` stays cached when only ``kalman.py`` changes, and would run the
@@ -14,9 +15,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from altfuse.compiled import compiled, sources_digest
+from altfuse.compiled import compiled, compiled_loop, compiled_step, sources_digest
 
-__all__ = ["compiled"]
+__all__ = ["compiled", "compiled_loop", "compiled_step"]
 
 _HERE = Path(__file__).resolve().parent
 _STAMP = "altfuse-sources.sha256"

@@ -24,14 +24,16 @@ asked for are made of ``P_s`` (of ``h``; of a sample's own row, ``H P_s H'``), e
 
 Each step works in place on its arrays, as loops, with the caller's scratch arrays
 (:class:`Scratch`): compiled (:mod:`.compiled`), a flight's hundreds of thousands of steps then
-allocate nothing (measured: 1.07 us a step with a new array per product, 0.08 us in place).
+allocate nothing (measured: 1.07 us a step with a new array per product, 0.08 us in place),
+and, inlined into the passes' loops, count no references to them either
+(:func:`altfuse.compiled.compiled_step`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from altfuse.fuse.smoother.compiled import compiled
+from altfuse.fuse.smoother.compiled import compiled, compiled_step
 from altfuse.model import FloatArray
 
 #: Work arrays for ``n`` states (:func:`scratch`): three (n, n), two (n,).
@@ -49,7 +51,17 @@ def scratch(n: int) -> Scratch:
     return np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n)), np.zeros(n), np.zeros(n)
 
 
-@compiled
+@compiled_step
+def assign(out: FloatArray, a: FloatArray) -> None:
+    """``out[...] = a``, element by element (as flat views, a fifth of ``np.ndindex``'s time):
+    numba's slice assignment may copy ``a`` first, an allocation a
+    :func:`.compiled.compiled_loop` cannot make."""
+    flat, source = out.reshape(out.size), a.reshape(a.size)
+    for i in range(source.size):
+        flat[i] = source[i]
+
+
+@compiled_step
 def predict(
     x: FloatArray, p: FloatArray, fl: Transition, q: FloatArray, u: FloatArray, work: Scratch
 ) -> None:
@@ -64,11 +76,11 @@ def predict(
     for e in range(links.shape[0]):
         i, k = links[e, 0], links[e, 1]
         xw[i] += f[i, k] * x[k]
-    x[:] = xw
+    assign(x, xw)
     predict_covariance(p, fl, q, work)
 
 
-@compiled
+@compiled_step
 def predict_covariance(p: FloatArray, fl: Transition, q: FloatArray, work: Scratch) -> None:
     """The prior's covariance, in place (:func:`predict` without the state)."""
     f, links, decaying = fl
@@ -77,7 +89,7 @@ def predict_covariance(p: FloatArray, fl: Transition, q: FloatArray, work: Scrat
     # P = F P F' + Q = (I + E) (D P D) (I + E)' + Q:  D P D first
     scale_diagonal(p, f, decaying)
     # then F P = P + E P, and (F P) F' = F P + (F P) E'
-    fp[:] = p
+    assign(fp, p)
     for e in range(links.shape[0]):
         i, k = links[e, 0], links[e, 1]
         for j in range(n):
@@ -91,7 +103,7 @@ def predict_covariance(p: FloatArray, fl: Transition, q: FloatArray, work: Scrat
             p[i, j] += fp[i, k] * f[j, k]
 
 
-@compiled
+@compiled_step
 def innovation(
     x: FloatArray, p: FloatArray, z: float, h: FloatArray, r: float, ph: FloatArray
 ) -> tuple[float, float]:
@@ -114,7 +126,7 @@ def innovation(
     return y, s
 
 
-@compiled
+@compiled_step
 def update(x: FloatArray, p: FloatArray, y: float, s: float, ph: FloatArray) -> float:
     """The posterior after a measurement of innovation ``y`` (from :func:`innovation`), in
     place; the gain on the first state, ``K[0]``."""
@@ -130,7 +142,7 @@ def update(x: FloatArray, p: FloatArray, y: float, s: float, ph: FloatArray) -> 
     return float(ph[0] / s)
 
 
-@compiled
+@compiled_step
 def adjoint_update(
     adjoint: tuple[FloatArray, FloatArray],
     h: FloatArray,
@@ -164,7 +176,7 @@ def adjoint_update(
             big[i, j] += h[i] * (h[j] * b - w[j]) - w[i] * h[j]
 
 
-@compiled
+@compiled_step
 def pack(p: FloatArray, out: FloatArray) -> None:
     """The upper triangle of the symmetric ``p`` (n, n), row by row, into ``out``
     (n (n + 1) / 2): what a kept covariance costs, 28 numbers instead of 49 for n = 7."""
@@ -176,7 +188,7 @@ def pack(p: FloatArray, out: FloatArray) -> None:
             m += 1
 
 
-@compiled
+@compiled_step
 def unpack(packed: FloatArray, out: FloatArray) -> None:
     """The symmetric matrix (n, n) of :func:`pack`'s ``packed``, into ``out``."""
     n = out.shape[0]
@@ -187,7 +199,7 @@ def unpack(packed: FloatArray, out: FloatArray) -> None:
             m += 1
 
 
-@compiled
+@compiled_step
 def restart(
     x: FloatArray, p: FloatArray, start: tuple[FloatArray, FloatArray], states: np.ndarray
 ) -> None:
@@ -209,7 +221,7 @@ def restart(
                 p[i, j] = p0[i, j]
 
 
-@compiled
+@compiled_step
 def adjoint_restart(adjoint: tuple[FloatArray, FloatArray], states: np.ndarray) -> None:
     """The adjoint carried back through :func:`restart`, in place: ``F = 0`` for the
     ``states``, so their entries of lambda and their rows and columns of Lambda vanish."""
@@ -223,7 +235,7 @@ def adjoint_restart(adjoint: tuple[FloatArray, FloatArray], states: np.ndarray) 
                 big[i, j] = big[j, i] = 0.0
 
 
-@compiled
+@compiled_step
 def adjoint_predict(adjoint: tuple[FloatArray, FloatArray], fl: Transition, work: Scratch) -> None:
     """The smoother's adjoint carried back through a transition, in place: from the prior at
     step k to the posterior at k - 1 (``F`` between them)."""
@@ -232,19 +244,19 @@ def adjoint_predict(adjoint: tuple[FloatArray, FloatArray], fl: Transition, work
     old, bf = work[3], work[0]
     n = lam.size
     # lambda = F' lambda = D (lambda + E' lambda)
-    old[:] = lam
+    assign(old, lam)
     for e in range(links.shape[0]):
         i, k = links[e, 0], links[e, 1]
         lam[k] += f[i, k] * old[i]
     for c in decaying:
         lam[c] *= f[c, c]
     # Lambda = F' (Lambda F):  Lambda F = Lambda + Lambda E, then F' (Lambda F) adds E' (Lambda F)
-    bf[:] = big
+    assign(bf, big)
     for e in range(links.shape[0]):
         i, k = links[e, 0], links[e, 1]
         for r in range(n):
             bf[r, k] += big[r, i] * f[i, k]
-    big[:] = bf
+    assign(big, bf)
     for e in range(links.shape[0]):
         i, k = links[e, 0], links[e, 1]
         for c in range(n):
@@ -253,7 +265,7 @@ def adjoint_predict(adjoint: tuple[FloatArray, FloatArray], fl: Transition, work
     scale_diagonal(big, f, decaying)
 
 
-@compiled
+@compiled_step
 def scale_diagonal(m: FloatArray, f: FloatArray, decaying: np.ndarray) -> None:
     """``D m D`` in place, for a symmetric ``m``: ``D`` the identity but for ``F``'s own entries
     ``f[c, c]`` of the ``decaying`` states."""
@@ -264,7 +276,7 @@ def scale_diagonal(m: FloatArray, f: FloatArray, decaying: np.ndarray) -> None:
             m[j, c] *= d
 
 
-@compiled
+@compiled_step
 def smoothed_variance(p: FloatArray, big: FloatArray, h: FloatArray, work: Scratch) -> float:
     """``H P_s H'`` of a row ``h``, from the filtered ``P`` and the adjoint's ``Lambda`` after it:
     ``H P H' - (P H')' Lambda (P H')``."""

@@ -12,9 +12,9 @@ from typing import Literal
 import numpy as np
 
 from altfuse.datum import DYNAMIC_PRIOR, GROUND_MAX_SPEED_M_S, dynamic_head
-from altfuse.fuse.smoother.compiled import compiled
+from altfuse.fuse.smoother.compiled import compiled_step
 from altfuse.fuse.smoother.events import TICK, VELOCITY
-from altfuse.fuse.smoother.kalman import innovation, update
+from altfuse.fuse.smoother.kalman import assign, innovation, update
 from altfuse.metrics import mad_sigma, running_median, runs
 from altfuse.model import FloatArray, Samples
 
@@ -432,7 +432,7 @@ def couplings(use_bias: bool, drifts: np.ndarray) -> np.ndarray:
 Structure = tuple[bool, np.ndarray, np.ndarray, float]
 
 
-@compiled
+@compiled_step
 def transition(f: FloatArray, dt: float, structure: Structure) -> None:
     """F over ``dt``, into ``f`` (an identity but for the entries :func:`couplings` lists and
     the diagonal's at the bounded offsets): h += v dt - b dt^2/2, v += -b dt, c_i += r_i dt
@@ -484,7 +484,7 @@ class Events:
     model: np.ndarray | None = None
 
 
-@compiled
+@compiled_step
 def process_noise(
     q: FloatArray, dt: float, q_accel: float, q_state: FloatArray, structure: Structure
 ) -> None:
@@ -549,29 +549,30 @@ def regressor_coefficients(regressors: Sequence[Regressor], events: int) -> Floa
     return coef
 
 
-@compiled
+@compiled_step
 def measurement_row(rows: Rows, series: int, k: int, out: FloatArray) -> None:
     """Event ``k``'s row of H (a sample of ``series``) into ``out`` (:func:`measurement_rows`)."""
     base, regs, coef = rows
-    out[:] = base[series + 2]
+    assign(out, base[series + 2])
     for j in range(regs.shape[0]):
         if regs[j, 1] == series:
             out[regs[j, 0]] = coef[j, k]
 
 
-@compiled
-def hold_still(x: FloatArray, p: FloatArray, record: FloatArray, at_datum: bool) -> None:
+@compiled_step
+def hold_still(
+    x: FloatArray, p: FloatArray, record: FloatArray, at_datum: bool, unit: FloatArray
+) -> None:
     """Standing on the ground, in place: v = 0, and at the datum (``at_datum``: before take-off)
     h = 0 too (the datum's definition), as measurements of variance ``STILL_SIGMA^2``. Each
     one's ``P H'``, ``S`` and innovation go into a row of ``record`` (2, n + 2), for the
-    smoother's backward pass; ``S`` 0 where there was none (h, away from the datum)."""
+    smoother's backward pass; ``S`` 0 where there was none (h, away from the datum).
+    ``unit``: the rows of H of h and v (2, n)."""
     n = x.size
     record[0, n] = 0.0
     for j in range(0 if at_datum else 1, 2):
-        row = np.zeros(n)
-        row[j] = 1.0
         ph = record[j, :n]
-        y, s = innovation(x, p, 0.0, row, STILL_SIGMA**2, ph)
+        y, s = innovation(x, p, 0.0, unit[j], STILL_SIGMA**2, ph)
         record[j, n], record[j, n + 1] = s, y
         update(x, p, y, s, ph)
 

@@ -17,13 +17,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from altfuse.fuse.smoother.compiled import compiled
+from altfuse.fuse.smoother.compiled import compiled, compiled_loop, compiled_step
 from altfuse.fuse.smoother.events import TICK, model_intervals
 from altfuse.fuse.smoother.kalman import (
+    Scratch,
     Transition,
     adjoint_predict,
     adjoint_restart,
     adjoint_update,
+    assign,
     innovation,
     pack,
     predict,
@@ -277,6 +279,11 @@ Model = tuple[
     float,
     tuple[FloatArray, FloatArray, np.ndarray, np.ndarray, FloatArray],
 ]
+#: The arrays a pass's loops work in (:func:`_arena`): F, Q, B u, the steps' scratch, an event's
+#: row of H, state and covariance, and the rows of H of h and v.
+Arena = tuple[
+    Transition, FloatArray, FloatArray, Scratch, FloatArray, FloatArray, FloatArray, FloatArray
+]
 
 
 @compiled
@@ -362,21 +369,22 @@ def _restored(checkpoints: Checkpoints, b: int) -> Carry:
     )  # fmt: skip
 
 
-@compiled
+@compiled_loop
 def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tuples ran 2.4x slower)
     model: Model,
     span: tuple[int, int],
     carry: Carry,
     kept: tuple[Kept, bool],
     verdicts: Verdicts,
+    arena: Arena,
 ) -> None:
     """The forward filter over the events ``span[0]`` to ``span[1] - 1`` from its state
     ``carry`` (updated in place), each sample's verdicts into ``verdicts``; with ``kept[1]``,
     what the backward pass needs of each event into ``kept[0]``, from its first slot: the
     posterior state and covariance, the sample's ``P H'``, ``S`` and innovation (``S`` 0 where
     it was not fused), and per event held on the ground the same of its holds. ``model``:
-    :func:`_forward`'s arguments."""
-    (t, who, z, r, rows), (a, q_accel, q_state, structure, links), marks = model[:3]
+    :func:`_forward`'s arguments; ``arena``: the arrays it works in (:func:`_arena`)."""
+    (t, who, z, r, rows), (a, q_accel, q_state, structure, _), marks = model[:3]
     still, landed, early = marks
     gate, start = model[3], model[4]
     x, p, sensor_accepted, sensor_r, refused, support, clock = carry
@@ -386,10 +394,8 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
     n = x.size
     previous, last_accepted, held, episode = clock[0], clock[1], int(clock[2]), int(clock[3])
     first_held = held
-    fl: Transition = (np.eye(n), links, structure[2])
-    q, u = np.zeros((n, n)), np.zeros(n)
-    work = scratch(n)
-    ph, hk = work[4], np.zeros(n)  # an event's P H' and row of H
+    fl, q, u, work, hk, _, _, unit = arena
+    ph = work[4]  # an event's P H' (and hk its row of H)
     y = s = 0.0
     for k in range(span[0], span[1]):
         dt = t[k] - previous
@@ -438,7 +444,7 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
         # the innovation gate: |y| <= gate sqrt(S)
         if i != TICK and y * y <= gate * gate * s:
             if keep:
-                updates[slot, :n] = ph
+                assign(updates[slot, :n], ph)
                 updates[slot, n], updates[slot, n + 1] = s, y
             gain = update(x, p, y, s, ph)
             if gain_h.size:
@@ -453,10 +459,10 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
             if loglik.size:  # log N(y; 0, S)
                 loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
         if still[k] or landed[k]:
-            hold_still(x, p, holds[held - first_held if keep else 0], still[k])
+            hold_still(x, p, holds[held - first_held if keep else 0], still[k], unit)
             held += 1
         if keep:
-            xf[slot] = x
+            assign(xf[slot], x)
             pack(p, pf[slot])
     clock[0], clock[1], clock[2], clock[3] = previous, last_accepted, held, episode
 
@@ -479,7 +485,7 @@ def _kept(kept: int, n: int, held: int) -> tuple[FloatArray, FloatArray, FloatAr
     return states, covariances, np.zeros((kept, n + 2)), np.zeros((held, 2, n + 2))
 
 
-@compiled
+@compiled_step
 def _agreed(c: int, y: float, seen: tuple[float, FloatArray, FloatArray]) -> int:
     """Whether another sensor than state ``c``'s was rejected on the side of the innovation
     ``y`` since the last accepted sample: AGREED_TOGETHER where one the estimate followed
@@ -501,7 +507,7 @@ def _agreed(c: int, y: float, seen: tuple[float, FloatArray, FloatArray]) -> int
     return agreed
 
 
-@compiled
+@compiled_step
 def _leaning(
     c: int, innovation: tuple[float, float], now: float, accepted: FloatArray, support: FloatArray
 ) -> int:
@@ -535,7 +541,7 @@ def _leaning(
     return 0
 
 
-@compiled
+@compiled_step
 def _silent(now: float, last_accepted: float, accepted: FloatArray, refused: FloatArray) -> bool:
     """Whether every sensor the estimate followed until the last accepted sample (``accepted``,
     per state its sensor's last accepted sample [s], within LOCKOUT_S of ``last_accepted``)
@@ -550,7 +556,7 @@ def _silent(now: float, last_accepted: float, accepted: FloatArray, refused: Flo
     return True
 
 
-@compiled
+@compiled_step
 def _release(
     c: int,
     y: float,
@@ -656,16 +662,17 @@ def _backward(
     # the last block as the forward pass kept it
     span = ((blocks - 1) * block, count)
     filtered = (span, buffers[(blocks - 1) % 2], last_held)
+    arena = _arena(n, dynamics)  # the refilter's own are its _held's
     with ThreadPoolExecutor(1, thread_name_prefix="altfuse-pass") as pool:
         for b in range(blocks - 1, -1, -1):
             ahead = pool.submit(refilter, b - 1) if b else None
-            _back(events, filtered, dynamics, adjoint, (smoothed, smooth, at))
+            _back(events, filtered, dynamics, adjoint, (smoothed, smooth, at), arena)
             if ahead is not None:
                 filtered = ahead.result()
     return smoothed
 
 
-@compiled
+@compiled_step
 def _kept_row(k: int, tick: bool, ticks: bool, cursor: np.ndarray) -> int:
     """The row event ``k``'s smoothed state is kept in: its own, or with ``ticks`` the next
     from the end (``cursor[0]``, counted down) at a tick and none (-1) elsewhere."""
@@ -677,7 +684,7 @@ def _kept_row(k: int, tick: bool, ticks: bool, cursor: np.ndarray) -> int:
     return int(cursor[0])
 
 
-@compiled
+@compiled_step
 def _row_value(h: FloatArray, x: FloatArray) -> float:
     """``H x`` of a row ``h``, its entries in order, those that are 0 left out (a lost state's
     NaN stays out, as in the row of a sensor it is not)."""
@@ -708,11 +715,24 @@ def _held(
 ) -> int:
     """:func:`_filter` over ``span``; how many of its events were held on the ground."""
     first_held = int(carry[6][2])
-    _filter(model, span, carry, kept, verdicts)
+    _filter(model, span, carry, kept, verdicts, _arena(carry[0].size, model[1]))
     return int(carry[6][2]) - first_held
 
 
 @compiled
+def _arena(
+    n: int, dynamics: tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray]
+) -> Arena:
+    """The arrays the loops of a pass over ``n`` states work in (:data:`Arena`), F's entries
+    off the diagonal and its decaying states from ``dynamics`` (:data:`Model`'s)."""
+    unit = np.zeros((2, n))
+    unit[0, 0] = unit[1, 1] = 1.0
+    fl: Transition = (np.eye(n), dynamics[4], dynamics[3][2])
+    q, u, hk, xk, p = np.zeros((n, n)), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, n))
+    return fl, q, u, scratch(n), hk, xk, p, unit
+
+
+@compiled_loop
 def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x slower)
     events: tuple[FloatArray, np.ndarray, Rows, np.ndarray, tuple[np.ndarray, np.ndarray]],
     filtered: tuple[tuple[int, int], Kept, int],
@@ -723,6 +743,7 @@ def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x
         bool,
         tuple[np.ndarray, bool, np.ndarray],
     ],
+    arena: Arena,
 ) -> None:
     """The modified Bryson-Frazier pass (:mod:`.kalman`) back over one block of filtered
     events, into ``out``'s states and variances; the adjoint (``lambda``, ``Lambda``) carried
@@ -735,21 +756,16 @@ def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x
     ``events``: the events' times, series, rows of H, which were held on the ground, and per
     event the row of the states that returned to the prior there, and those rows;
     ``filtered``: the block's span, :func:`_filter`'s records of it and its count of events
-    held. The covariances are left filtered: only the variances asked for are made of the
-    smoothed ones."""
+    held; ``arena``: the arrays it works in (:func:`_arena`). The covariances are left
+    filtered: only the variances asked for are made of the smoothed ones."""
     t, who, rows, held_at, resets = events
     span, (xf, pf, updates, holds), held = filtered
     (xs, var_h, hx, var_row), smooth, (states, ticks, cursor) = out
-    _, _, _, structure, links = dynamics
+    structure = dynamics[3]
     n = xf.shape[1]
-    fl: Transition = (np.eye(n), links, structure[2])
-    work = scratch(n)
-    p = np.zeros((n, n))  # each event's filtered covariance, unpacked
-    hk = np.zeros(n)  # and its row of H
-    xk = np.zeros(n)  # and its smoothed state
+    # each event's row of H, smoothed state and filtered covariance (unpacked) in the arena's
+    fl, _, _, work, hk, xk, p, unit = arena
     lam = adjoint[0]
-    unit = np.zeros((2, n))
-    unit[0, 0] = unit[1, 1] = 1.0
     for k in range(span[1] - 1, span[0] - 1, -1):
         slot = k - span[0]
         unpack(pf[slot], p)
