@@ -44,7 +44,7 @@ METHODS: dict[str, Method[Any]] = {
 #: simulators' 13 truth logs and altfuse's simulated flights (README, "Accuracy"). The smoother
 #: is the lowest RMSE on 198 of 198 simulated flights, within the project's bar on RMSE and
 #: maximum error on all 13 truth logs (support: 9), the only method with a fused_std, and
-#: 2.0-2.2x support's time on a 300 MB log, three interleaved pairs (5.4-5.5 s against 2.5-2.8 s
+#: 1.7-2.0x support's time on a 300 MB log, three interleaved pairs (4.9-5.3 s against 2.6-2.8 s
 #: whole process; README, "What altfuse reads").
 DEFAULT_METHOD = "smoother"
 

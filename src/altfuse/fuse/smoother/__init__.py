@@ -274,9 +274,9 @@ gated, and the gains per sensor are needed for the contributions. Cost is linear
 number of events: 3-4 us an event over all its passes on a 1-hour flight with its 400 Hz IMU
 and the GPS's velocity (``benchmarks/smoother_bench.py``; 6 us while numba counted the
 references of the arrays its loops held, :mod:`altfuse.compiled`; 12 us with
-Rauch-Tung-Striebel's O(n^3) gain), 2.0-2.2x ``support``'s time on a 300 MB log end to end
-(5.4 s against 2.5 s; 3.6x before, 3.3x before the compiled passes), 408-414 MiB against
-384-386 MiB, 1.42-1.44x the log (the backward pass filters each block of ``passes.BLOCK``
+Rauch-Tung-Striebel's O(n^3) gain), 1.7-2.0x ``support``'s time on a 300 MB log end to end
+(5.0 s against 2.8 s; 3.6x before, 3.3x before the compiled passes), 403-408 MiB against
+384-386 MiB, 1.40-1.42x the log (the backward pass filters each block of ``passes.BLOCK``
 events again from a checkpoint, and each pass keeps only what its caller reads,
 :class:`.passes.Keep`: 822 MiB when every event's covariance was kept).
 """

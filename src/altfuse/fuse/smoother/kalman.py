@@ -53,12 +53,19 @@ def scratch(n: int) -> Scratch:
 
 @compiled_step
 def assign(out: FloatArray, a: FloatArray) -> None:
-    """``out[...] = a``, element by element (as flat views, a fifth of ``np.ndindex``'s time):
-    numba's slice assignment may copy ``a`` first, an allocation a
-    :func:`.compiled.compiled_loop` cannot make."""
-    flat, source = out.reshape(out.size), a.reshape(a.size)
-    for i in range(source.size):
-        flat[i] = source[i]
+    """``out[:] = a`` for vectors, element by element: numba's slice assignment may copy ``a``
+    first, an allocation a :func:`.compiled.compiled_loop` cannot make (:func:`assign_matrix`
+    for matrices; one for both, through flat views, spent 7 % of a run in numba's reshape)."""
+    for i in range(a.size):
+        out[i] = a[i]
+
+
+@compiled_step
+def assign_matrix(out: FloatArray, a: FloatArray) -> None:
+    """``out[:] = a`` for matrices (:func:`assign`)."""
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            out[i, j] = a[i, j]
 
 
 @compiled_step
@@ -89,7 +96,7 @@ def predict_covariance(p: FloatArray, fl: Transition, q: FloatArray, work: Scrat
     # P = F P F' + Q = (I + E) (D P D) (I + E)' + Q:  D P D first
     scale_diagonal(p, f, decaying)
     # then F P = P + E P, and (F P) F' = F P + (F P) E'
-    assign(fp, p)
+    assign_matrix(fp, p)
     for e in range(links.shape[0]):
         i, k = links[e, 0], links[e, 1]
         for j in range(n):
@@ -251,12 +258,12 @@ def adjoint_predict(adjoint: tuple[FloatArray, FloatArray], fl: Transition, work
     for c in decaying:
         lam[c] *= f[c, c]
     # Lambda = F' (Lambda F):  Lambda F = Lambda + Lambda E, then F' (Lambda F) adds E' (Lambda F)
-    assign(bf, big)
+    assign_matrix(bf, big)
     for e in range(links.shape[0]):
         i, k = links[e, 0], links[e, 1]
         for r in range(n):
             bf[r, k] += big[r, i] * f[i, k]
-    assign(big, bf)
+    assign_matrix(big, bf)
     for e in range(links.shape[0]):
         i, k = links[e, 0], links[e, 1]
         for c in range(n):
