@@ -6,12 +6,14 @@ machine compiles, for some seconds; later ones load it), typed for mypy. A loop 
 of thousands of events takes :func:`compiled_loop`, and the steps it calls
 :func:`compiled_step`: numba counts the references of every array a compiled function holds,
 each count an atomic instruction, and its pass that prunes them cannot across a loop's
-branches (numba issue 2350); on the smoother's forward pass over the 300 MB log's 791,616
-events they were 69 an event and two thirds of its time (0.34 s; without them 0.10 s, the
-same numbers to the last bit). numba keys a cached
-function on its own source file: a kernel that calls functions of another file must have its
-cache forgotten when that file changes (:mod:`altfuse.fuse.smoother.compiled` does so for its
-package).
+branches (numba issue 2350). On the smoother's forward pass over the 300 MB log's 791,616
+events they took half its 0.34 s; with its steps inlined, still 69 an event and 70 % of its
+0.23 s; without them it takes 0.094 s, to the same numbers to the last bit.
+
+numba keys a cached function on its own source file: a kernel that calls functions of another
+file must have its cache forgotten when that file changes (:mod:`altfuse.fuse.smoother.compiled`
+does so for its package), and on none of the options that tell :func:`compiled_loop` and
+:func:`compiled_step` from :func:`compiled`: a function is decorated one way only.
 
 The first run on a machine compiles them, 20-25 s where loading them takes a fraction of a
 second; so that it does not pass in silence, each module whose loops are being compiled is
