@@ -240,15 +240,16 @@ def _dynamics(
     ev: Events, layout: Layout
 ) -> tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray]:
     """The events' accelerations and process-noise densities, and F's structure
-    (:data:`.model.Structure`) and its entries off the diagonal, as the kernels take them."""
-    a, q_accel, q_state = ev.a, ev.q_accel, ev.q_state
-    if ev.model is not None:  # an event of the output's clock alone: its model interval's
-        at = model_intervals(ev.model)
-        a, q_accel = a[at], q_accel[at]
-        q_state = q_state if q_state.shape[0] == 1 else q_state[at]
+    (:data:`.model.Structure`) and its entries off the diagonal, as the kernels take them.
+    An event of the output's clock alone takes its model interval's sensor densities
+    (``ev.model``); its acceleration and white-noise density are its interval's as made
+    (:func:`.events.on_every_event`)."""
+    q_state = ev.q_state
+    if ev.model is not None and q_state.shape[0] > 1:
+        q_state = q_state[model_intervals(ev.model)]
     q_state = np.ascontiguousarray(q_state, dtype=np.float64)
     structure = layout.structure(ev.use_bias)
-    return a, q_accel, q_state, structure, couplings(ev.use_bias, structure[1])
+    return ev.a, ev.q_accel, q_state, structure, couplings(ev.use_bias, structure[1])
 
 
 #: A filter's whole state between two events (:func:`_carry`): ``x``, ``P``, per state its
