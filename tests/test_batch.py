@@ -677,8 +677,8 @@ def test_the_shards_of_a_job_array_cover_every_log_once(tmp_path: Path) -> None:
     assert [r.log for r in first] == one.log.tolist() == ["a.bin", "c.bin", "e.bin"]
     assert two.log.tolist() == ["b.bin", "d.bin"]
     assert not (out / "summary.csv").exists()
-    # the README's commands combine them: every log once, as one batch of them all writes
-    readme = (ROOT / "README.md").read_text()
+    # the documented commands combine them: every log once, as one batch of them all writes
+    readme = (ROOT / "docs" / "commands.md").read_text()
     block = readme[readme.index("The shards' summaries and indexes combine") :]
     start = block.index("```bash\n") + len("```bash\n")
     block = block[start : block.index("\n```", start)]

@@ -1,5 +1,6 @@
 """What ``pyproject.toml`` declares against what is tested: ``.ci/lowest.txt`` pins each
-dependency at the floor that ``pyproject.toml`` declares (the README's lowest-versions run)."""
+dependency at the floor that ``pyproject.toml`` declares (``docs/install.md``'s lowest-versions
+run)."""
 
 from __future__ import annotations
 

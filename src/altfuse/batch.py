@@ -148,7 +148,7 @@ class Job:
 
 @dataclass(frozen=True)
 class LogResult:
-    """One row of the summary (README: "batch")."""
+    """One row of the summary (``docs/commands.md``, "batch")."""
 
     log: str
     status: Outcome  # "skipped": complete outputs found
@@ -730,7 +730,7 @@ def _locked(out: Path, shared: bool = False) -> Iterator[None]:
     """Hold a lock on the output folder itself (``flock`` on its descriptor: no lock file left
     behind) for the batch, or refuse when another batch holds it. The shards of one batch
     (``shared``) hold it together, each writing its own logs and summary. Windows has neither
-    ``flock`` nor a descriptor of a folder: there the folder is not locked (README)."""
+    ``flock`` nor a descriptor of a folder: there the folder is not locked (``docs/install.md``)."""
     out.mkdir(parents=True, exist_ok=True)
     if sys.platform == "win32":
         yield

@@ -348,7 +348,7 @@ def _cannot(path: Path, exc: OSError) -> OutputError:
 def _pid_alive(pid: int) -> bool:
     """Whether the process ``pid`` of this host is there (signal 0 asks). On Windows that signal
     is Ctrl+C, sent to the process group ``pid``, and nothing is asked: taken as alive, its
-    temporary files are left (README)."""
+    temporary files are left (``docs/install.md``)."""
     if sys.platform == "win32":
         return True
     try:

@@ -41,11 +41,11 @@ METHODS: dict[str, Method[Any]] = {
 }
 
 #: The method run when none is named: chosen by measurement, the worst case per log over the
-#: simulators' 13 truth logs and altfuse's simulated flights (README, "Accuracy"). The smoother
+#: simulators' 13 truth logs and altfuse's simulated flights (docs/accuracy.md). The smoother
 #: is the lowest RMSE on 198 of 198 simulated flights, within the project's bar on RMSE and
 #: maximum error on all 13 truth logs (support: 9), the only method with a fused_std, and
 #: 1.7-2.0x support's time on a 300 MB log, three interleaved pairs (4.9-5.3 s against 2.6-2.8 s
-#: whole process; README, "What altfuse reads").
+#: whole process; docs/reading.md).
 DEFAULT_METHOD = "smoother"
 
 

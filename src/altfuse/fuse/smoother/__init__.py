@@ -253,7 +253,7 @@ barometer in the airflow in a 2 m/s wind along the track (``baro-airflow``) 0.05
 mission's wind told against the height smoothed without the barometer, 1.4-2.0 m/s; the
 climb flies one way, where no wind can be told apart from the head), 0.41-0.55 for the
 best other method. On the
-simulators' 13 truth logs (``benchmarks/truth_accuracy.py``, README "Accuracy"): RMSE and
+simulators' 13 truth logs (``benchmarks/truth_accuracy.py``, ``docs/accuracy.md``): RMSE and
 maximum error within the project's bar on all 13; the coverage 0.911-1.000, within 0.90-0.99
 on 8 (0.994-1.000 on five, among them those whose sensors lag the truth least:
 ``TIMING_SIGMA_S``; the quadplane's, whose scale the smoother learns, 0.994).
@@ -372,7 +372,7 @@ NIS_CHECK = 2.0
 #: 1.7 cm, beyond the model's 2 sigma of 1.5 cm (the 305 m climb's climbs were covered 0.35). It
 #: adds ``(v sigma)^2`` to the height's variance (``v`` the smoothed vertical velocity); the
 #: estimate is unchanged. 5 ms, the least that leaves no truth log's band overconfident, by
-#: the worst log of the 13 (README "Accuracy"; ``benchmarks/timing_sigma.py``, as measured
+#: the worst log of the 13 (``docs/accuracy.md``; ``benchmarks/timing_sigma.py``, as measured
 #: since the sensors' agreement is also measured on blocks' means, :func:`.noise.wander_bound`):
 #: coverage 0.63-0.98 with 0 (8 of 13 within 0.90-0.99), 0.866-0.995 with 4 ms (10 of 13:
 #: 0.866 and 0.899 below, where the sensors lag 9-12 ms), 0.909-1.000 with 5 ms (9 of 13, the
