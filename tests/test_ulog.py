@@ -354,19 +354,15 @@ def test_a_gps_is_read_from_its_first_epv_of_a_converged_fix(
     """As for DataFlash logs (GPA.VAcc): a receiver's samples until its first ``epv`` within
     GPS_CONVERGED_VACC_M are dropped, counted, its velocities too. The log's receiver reports
     0.7-0.8 m from its first fix on; its first ten reports are made 12 m here."""
-    import pyulog
 
-    class Settling(pyulog.ULog):  # type: ignore[misc]
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            for d in self.data_list:
-                if d.name == "vehicle_gps_position" and d.multi_id == 0:
-                    d.data["epv"] = d.data["epv"].copy()
-                    d.data["epv"][:10] = 12.0
+    def settling(name: str, data: dict[str, np.ndarray]) -> None:
+        if name == "vehicle_gps_position":  # the log's one receiver
+            data["epv"] = data["epv"].copy()
+            data["epv"][:10] = 12.0
 
     log = shared_log("px4/px4ulogrs_esc_status_log.ulg")
     plain = read_log(log)
-    monkeypatch.setattr(pyulog, "ULog", Settling)
+    _patched(monkeypatch, settling)
     settled = read_log(log)
     before = next(s for s in plain.sensors if s.kind == "gps")
     after = next(s for s in settled.sensors if s.kind == "gps")
@@ -382,18 +378,14 @@ def test_a_distance_sensor_not_facing_down_is_left_out_and_said(
 ) -> None:
     """The log's one distance sensor made to face forward (orientation 0, obstacle avoidance):
     no rangefinder, and the reason in the dropped sources (it was left out in silence)."""
-    import pyulog
 
-    class Forward(pyulog.ULog):  # type: ignore[misc]
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            for d in self.data_list:
-                if d.name == "distance_sensor":
-                    d.data["orientation"] = np.zeros_like(d.data["orientation"])
+    def forward(name: str, data: dict[str, np.ndarray]) -> None:
+        if name == "distance_sensor":
+            data["orientation"] = np.zeros_like(data["orientation"])
 
     log = shared_log("px4/px4ulogrs_esc_status_log.ulg")
     assert "rangefinder" in {s.kind for s in read_log(log).sensors}
-    monkeypatch.setattr(pyulog, "ULog", Forward)
+    _patched(monkeypatch, forward)
     flight = read_log(log)
     assert "rangefinder" not in {s.kind for s in flight.sensors}
     assert flight.dropped_sources["distance_sensor[0]"] == (
@@ -404,17 +396,17 @@ def test_a_distance_sensor_not_facing_down_is_left_out_and_said(
 def _patched(
     monkeypatch: pytest.MonkeyPatch, change: Callable[[str, dict[str, np.ndarray]], object]
 ) -> None:
-    """pyulog's ULog made to pass each topic's name and columns through ``change`` (in place)
-    once parsed."""
-    import pyulog
+    """The reader's decoding (pyulog's, whole or along the compiled walk: ``ulog._parsed``)
+    made to pass each topic's name and columns through ``change`` (in place)."""
+    parsed = ulog._parsed
 
-    class Changed(pyulog.ULog):  # type: ignore[misc]
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            for d in self.data_list:
-                change(d.name, d.data)
+    def changed(*args: Any) -> tuple[Any, list[str]]:
+        decoded, printed = parsed(*args)
+        for d in decoded.data_list:
+            change(d.name, d.data)
+        return decoded, printed
 
-    monkeypatch.setattr(pyulog, "ULog", Changed)
+    monkeypatch.setattr(ulog, "_parsed", changed)
 
 
 def _failing_over(monkeypatch: pytest.MonkeyPatch, at: float, step_m: float) -> None:
