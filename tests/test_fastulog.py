@@ -8,6 +8,8 @@ from __future__ import annotations
 import contextlib
 import io
 import struct
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -178,6 +180,9 @@ def _damaged(raw: bytes, how: str) -> bytes:
         _, msg_id, _ = next(s for s in kept if s[0] > first)
         (size,) = struct.unpack_from("<H", raw, first)
         return raw[: first + 3 + size] + _data_of(raw, msg_id) + raw[first + 3 + size :]
+    if how == "data among the definitions":
+        at = _first(raw, "F")
+        return raw[:at] + _data_of(raw, kept[0][1]) + raw[at:]
     if how == "a definition after the data began":
         fmt = _first(raw, "F")
         (size,) = struct.unpack_from("<H", raw, fmt)
@@ -194,6 +199,7 @@ def _damaged(raw: bytes, how: str) -> bytes:
         "data one byte longer",
         "a kept topic's id subscribed again to another",
         "data before its subscription",
+        "data among the definitions",
         "a definition after the data began",
         "another log joined",
     ],
@@ -225,3 +231,36 @@ def test_a_log_cut_before_its_data_is_left_to_pyulog(where: str, tmp_path: Path)
     raw = shared_log(f"px4/{BASE}").read_bytes()
     cut = 17 if where == "in the file's header" else _first(raw, "A") // 2
     assert fastulog.decode(_write(tmp_path, raw[:cut]), TOPICS) is None
+
+
+#: Fuzzed variants (``tests/fuzzing.py``'s base, mutations and seed) whose definitions the
+#: damage left holding other types: given them alone, pyulog stepped a byte at a time off the
+#: chain and back over the same bytes without end (each ran ``fuzz_long.py`` past its 30 s).
+OFF_THE_CHAIN = [
+    ("px4ulogrs_corrupt_actuator_armed_wrong_size.ulg", "zero truncate ulog-values", 40017283),
+    ("pyulog_sample_appended_multiple.ulg", "duplicate truncate flip", 4289618775),
+    ("px4ulogrs_corrupt_actuator_armed_wrong_size.ulg", "garbage zero garbage", 331599789),
+    ("pyulog_sample_px4_events.ulg", "garbage zero duplicate", 3762536897),
+    ("px4ulogrs_corrupt_unregistered_msg_id.ulg", "ulog-values duplicate duplicate", 1724032410),
+]
+
+
+def test_definitions_off_the_chain_are_left_to_pyulog_whole(tmp_path: Path) -> None:
+    """Run apart, so that a walk that hangs fails the test rather than the suite."""
+    script = f"""
+import sys
+from pathlib import Path
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+from fuzzing import variant
+from altfuse.io.fastulog import decode
+from altfuse.io.ulog import TOPICS
+for base, names, seed in {OFF_THE_CHAIN!r}:
+    path = Path({str(tmp_path)!r}) / "damaged.ulg"
+    data = Path({str(shared_log("px4"))!r}, base).read_bytes()
+    path.write_bytes(variant(data, None, names.split(), seed))
+    print(decode(path, TOPICS))
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=True
+    )
+    assert done.stdout.split() == ["None"] * len(OFF_THE_CHAIN)

@@ -51,8 +51,14 @@ from altfuse.io.fastdf import _CHUNK, _release, exit_on_sigbus
 HEADER = 3
 #: The file's header: the magic bytes, the version and the start's timestamp.
 FILE_HEADER = 16
-#: The types that begin the data section (pyulog's definitions loop stops at the first).
+#: The types that begin the data section (pyulog's definitions loop stops at the first), and
+#: the definitions' (flag bits, formats, info, parameters): pyulog reads the definitions
+#: alone only where they hold no other type. Another is skipped by its loop, or taken as damage
+#: and stepped over a byte at a time, off the chain: where a message then claims more bytes
+#: than are left, pyulog steps back and reads them again without end (a fuzzed log whose
+#: definitions were zeroed in part).
 DATA_SECTION = frozenset(b"ALC")
+DEFINITIONS = frozenset(b"BFIMPQ")
 _DATA = ord("D")
 _FOUND = 1 << 14  # messages other than data found per call of the walk
 
@@ -200,8 +206,8 @@ def decode(path: Path, topics: tuple[str, ...], end: int | None = None) -> Decod
     file = _File(np.frombuffer(mapped, dtype=np.uint8), mapped)
     offsets, types = _others(file, size if end is None else min(end, size))
     begins = np.flatnonzero(np.isin(types, list(DATA_SECTION)))
-    if not begins.size:
-        return None  # no data: nothing to walk
+    if not begins.size or not _definitions_only(file.data, offsets[: begins[0] + 1], types):
+        return None  # no data to walk, or definitions pyulog must read in the whole file
     first = int(begins[0])
     head = _definitions(bytes(file.data[: offsets[first]]))
     if head is None:
@@ -220,6 +226,21 @@ def decode(path: Path, topics: tuple[str, ...], end: int | None = None) -> Decod
         result.data_list.append(ULog.Data(sub))
     result.data_list.sort(key=lambda d: (d.name, d.multi_id))
     return result
+
+
+def _definitions_only(
+    data: npt.NDArray[np.uint8], offsets: npt.NDArray[np.int64], types: npt.NDArray[np.uint8]
+) -> bool:
+    """Whether the messages up to the data section's first (the last of ``offsets``) are
+    definitions (``types``), one after the other from the file's header: no other message,
+    not even a data message, between them."""
+    before = offsets[:-1]
+    sizes = data[before].astype(np.int64) | data[before + 1].astype(np.int64) << 8
+    return bool(
+        offsets[0] == FILE_HEADER
+        and (before + HEADER + sizes == offsets[1:]).all()
+        and np.isin(types[: before.size], list(DEFINITIONS)).all()
+    )
 
 
 def _definitions(head: bytes) -> tuple[Decoded, dict[str, Any]] | None:
