@@ -180,6 +180,13 @@ def _damaged(raw: bytes, how: str) -> bytes:
         _, msg_id, _ = next(s for s in kept if s[0] > first)
         (size,) = struct.unpack_from("<H", raw, first)
         return raw[: first + 3 + size] + _data_of(raw, msg_id) + raw[first + 3 + size :]
+    if how == "a kept topic's format of padding alone":
+        name = kept[0][2].encode() + b":"
+        formats = [a for a in _chain(raw) if raw[a + 2] == ord("F")]
+        at = next(a for a in formats if raw[a + 3 : a + 3 + len(name)] == name)
+        (size,) = struct.unpack_from("<H", raw, at)
+        padding = _message("F", name + b"uint8_t[8] _padding0;")
+        return raw[:at] + padding + raw[at + 3 + size :]
     if how == "data among the definitions":
         at = _first(raw, "F")
         return raw[:at] + _data_of(raw, kept[0][1]) + raw[at:]
@@ -199,6 +206,7 @@ def _damaged(raw: bytes, how: str) -> bytes:
         "data one byte longer",
         "a kept topic's id subscribed again to another",
         "data before its subscription",
+        "a kept topic's format of padding alone",
         "data among the definitions",
         "a definition after the data began",
         "another log joined",

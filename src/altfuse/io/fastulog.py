@@ -308,7 +308,10 @@ def _parse(
             return None
         if sub.msg_id in subscribed:
             return None  # pyulog keeps the last subscription: the data before it is lost
-        subscribed[sub.msg_id] = (sub if sub.message_name in topics else None, at)
+        kept = sub.message_name in topics
+        if kept and not sub.dtype.itemsize:
+            return None  # a format of no field (padding alone): each message is damage
+        subscribed[sub.msg_id] = (sub if kept else None, at)
     return subscribed
 
 
