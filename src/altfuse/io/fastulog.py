@@ -59,7 +59,11 @@ FILE_HEADER = 16
 #: definitions were zeroed in part).
 DATA_SECTION = frozenset(b"ALC")
 DEFINITIONS = frozenset(b"BFIMPQ")
+#: Every type pyulog knows but data ("D"): the definitions', and the data section's others.
+KNOWN = DEFINITIONS | frozenset(b"ALCOS")
 _DATA = ord("D")
+#: Why :func:`_walk` stopped: to go on from there, the chain's end, a type pyulog does not know.
+GO_ON, ENDED, UNKNOWN = 0, 1, 2
 _FOUND = 1 << 14  # messages other than data found per call of the walk
 
 
@@ -83,37 +87,41 @@ def _size(data: npt.NDArray[np.uint8], at: int) -> int:
 
 
 @compiled
-def _walk(
+def _walk(  # noqa: PLR0913 (the bytes, where to walk, the types known, the two columns)
     data: npt.NDArray[np.uint8],
     start: int,
     limit: int,
     stop: int,
+    known: npt.NDArray[np.bool_],
     offsets: npt.NDArray[np.int64],
     types: npt.NDArray[np.uint8],
-) -> tuple[int, int, bool]:
+) -> tuple[int, int, int]:
     """The chain of messages from byte ``start``, each at the end of the one before, as
     pyulog's loops walk it: the offset and type of each message but data messages (hundreds
     of them, where data messages are millions), into the first entries of ``offsets`` and
-    ``types``, until ``limit`` or as many as they hold; their count, where the walk is to go on
-    from, and whether the chain ended there (at ``stop``, or at a message the file ends
-    inside: pyulog's loop stops there)."""
+    ``types``, until ``limit`` or as many as they hold. Their count, where the walk is to go
+    on from, and why it stopped there: GO_ON, ENDED (at ``stop``, or at a message the file
+    ends inside: pyulog's loop stops there) or UNKNOWN (a type not ``known``: damage, where a
+    zeroed stretch would list a message every 3 bytes)."""
     n = 0
     at = start
     while at < limit:
         if at + HEADER > stop:
-            return n, at, True
+            return n, at, ENDED
         size = _size(data, at)
         if at + HEADER + size > stop:
-            return n, at, True
+            return n, at, ENDED
         kind = data[at + 2]
         if kind != _DATA:
+            if not known[kind]:
+                return n, at, UNKNOWN
             if n == offsets.size:
-                return n, at, False
+                return n, at, GO_ON
             offsets[n] = at
             types[n] = kind
             n += 1
         at += HEADER + size
-    return n, at, False
+    return n, at, GO_ON
 
 
 @compiled
@@ -176,20 +184,24 @@ class _File:
         return True
 
 
-def _others(file: _File, stop: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.uint8]]:
+def _others(file: _File, stop: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.uint8]] | None:
     """The offsets and types of the chain's messages but data messages (:func:`_walk`) from
-    the file's header to ``stop``, walked a chunk at a time; the file's ``end`` set where the
-    chain ends."""
+    the file's header to ``stop``, walked a chunk at a time, the file's ``end`` set where the
+    chain ends; None at a type pyulog does not know."""
+    known = np.zeros(256, dtype=np.bool_)
+    known[list(KNOWN)] = True
     offsets = np.empty(_FOUND, dtype=np.int64)
     types = np.empty(_FOUND, dtype=np.uint8)
     found = [(offsets[:0], types[:0])]
-    at, released, ended = FILE_HEADER, 0, False
-    while not ended:
+    at, released, state = FILE_HEADER, 0, GO_ON
+    while state == GO_ON:
         limit = (at // _CHUNK + 1) * _CHUNK
-        n, at, ended = _walk(file.data, at, limit, stop, offsets, types)
+        n, at, state = _walk(file.data, at, limit, stop, known, offsets, types)
         found.append((offsets[:n].copy(), types[:n].copy()))
         _release(file.mapped, released, at)
         released = at
+    if state == UNKNOWN:
+        return None
     file.end = at
     return np.concatenate([f[0] for f in found]), np.concatenate([f[1] for f in found])
 
@@ -204,7 +216,10 @@ def decode(path: Path, topics: tuple[str, ...], end: int | None = None) -> Decod
             return None
         mapped = mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ)
     file = _File(np.frombuffer(mapped, dtype=np.uint8), mapped)
-    offsets, types = _others(file, size if end is None else min(end, size))
+    chain = _others(file, size if end is None else min(end, size))
+    if chain is None:
+        return None
+    offsets, types = chain
     begins = np.flatnonzero(np.isin(types, list(DATA_SECTION)))
     if not begins.size or not _definitions_only(file.data, offsets[: begins[0] + 1], types):
         return None  # no data to walk, or definitions pyulog must read in the whole file
