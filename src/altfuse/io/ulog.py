@@ -2,8 +2,8 @@
 
 pyulog (PX4's own parser, BSD-3) decodes the file into numpy arrays per topic instance, as
 pymavlink serves DataFlash: on an intact file with pyulog's own classes along a compiled walk
-of its messages (:mod:`altfuse.io.fastulog`: a 290 MB log in 0.40 s where pyulog's loop takes
-3.87 s), on any other by pyulog whole. This module picks the topics and turns them into
+of its messages (:mod:`altfuse.io.fastulog`: a 296 MB log in 0.42 s where pyulog's loop takes
+5.33 s), on any other by pyulog whole. This module picks the topics and turns them into
 altfuse's sources (``tests/test_ulog.py`` checks every value against pyulog's decoding):
 
 - **GPS**: ``vehicle_gps_position`` or ``sensor_gps``, whichever has more samples (one is the
