@@ -62,6 +62,17 @@ DEFINITIONS = frozenset(b"BFIMPQ")
 #: Every type pyulog knows but data ("D"): the definitions', and the data section's others.
 KNOWN = DEFINITIONS | frozenset(b"ALCOS")
 _DATA = ord("D")
+#: The classes of pyulog's that parse what the walk hands them (pyulog 1.0 to 1.3 have them).
+PYULOG_CLASSES = (
+    "_MessageHeader",
+    "_MessageAddLogged",
+    "_MessageInfo",
+    "_MessageParameterDefault",
+    "MessageLogging",
+    "MessageLoggingTagged",
+    "MessageDropout",
+    "Data",
+)
 #: Why :func:`_walk` stopped: to go on from there, the chain's end, a type pyulog does not know.
 GO_ON, ENDED, UNKNOWN = 0, 1, 2
 _FOUND = 1 << 14  # messages other than data found per call of the walk
@@ -208,7 +219,13 @@ def _others(file: _File, stop: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[
 
 def decode(path: Path, topics: tuple[str, ...], end: int | None = None) -> Decoded | None:
     """pyulog's decoding of ``topics`` in the ULog at ``path`` up to byte ``end`` (None: all
-    of it), for an intact file; None where pyulog must read it (see the module doc)."""
+    of it), for an intact file; None where pyulog must read it (see the module doc), or
+    where the pyulog installed lacks a class the walk parses with (its parsing classes are
+    its own, not its API: a release may rename them)."""
+    from pyulog import ULog
+
+    if not all(hasattr(ULog, name) for name in PYULOG_CLASSES):
+        return None
     exit_on_sigbus()
     with path.open("rb") as handle:
         size = handle.seek(0, 2)
@@ -234,8 +251,6 @@ def decode(path: Path, topics: tuple[str, ...], end: int | None = None) -> Decod
     buffers = _data(file, int(offsets[first]), subscribed)
     if buffers is None:
         return None
-    from pyulog import ULog
-
     for sub, buffer in buffers:
         sub.buffer = buffer
         result.data_list.append(ULog.Data(sub))
@@ -307,10 +322,10 @@ def _parse(
     header = ULog._MessageHeader()  # pyulog's own parsing, for its own values
     subscribed: dict[int, tuple[Any, int]] = {}
     for at in offsets.tolist():
-        header.initialize(bytes(data[at : at + HEADER]))
-        payload = bytes(data[at + HEADER : at + HEADER + header.msg_size])
-        kind = chr(header.msg_type)
         try:
+            header.initialize(bytes(data[at : at + HEADER]))
+            payload = bytes(data[at + HEADER : at + HEADER + header.msg_size])
+            kind = chr(header.msg_type)
             if kind != "A":
                 parsed = _PARSE[kind](ULog, payload, header)
                 if kind == "I":
