@@ -238,16 +238,28 @@ def _parse(path: Path) -> tuple[Any, list[str], int | None]:
     logs one after the other put 1,988 barometer samples out of order and the fused height
     561 m off. It flags every such file corrupt (the 90 pairs of the 10 shared PX4 logs not
     corrupt already), so only a corrupt one is searched for the other's header and parsed again:
-    the others are read once."""
-    ulog, printed = _parsed(path)
+    the others are read once. So is one whose other log pyulog cannot parse at all (pyulog
+    1.0 raises a KeyError on two joined simulator logs, where 1.3 flags them corrupt)."""
+    try:
+        ulog, printed = _parsed(path)
+    except LogReadError:
+        end = _appended(path)
+        if end is None:
+            raise
+        return (*_parsed(path, end), end)
     if not ulog.file_corruption:
         return ulog, printed, None
+    end = _appended(path)
+    return (ulog, printed, None) if end is None else (*_parsed(path, end), end)
+
+
+def _appended(path: Path) -> int | None:
+    """Where another log appended to the one at ``path`` begins (:func:`_appended_at`)."""
     try:
         with path.open("rb") as handle:
-            end = _appended_at(handle)
+            return _appended_at(handle)
     except OSError as exc:
         raise LogReadError(f"{path}: cannot read ({exc.strerror})") from exc
-    return (ulog, printed, None) if end is None else (*_parsed(path, end), end)
 
 
 def _parsed(path: Path, end: int | None = None) -> tuple[Any, list[str]]:
