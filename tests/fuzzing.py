@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -350,9 +351,13 @@ def ulog_values(data: bytes, rng: np.random.Generator, _: Records) -> bytes:
     else:
         rng.shuffle(v[run])
     topic.data[name] = v
-    out = io.BytesIO()
-    ulog.write_ulog(out)
-    return out.getvalue()
+    with tempfile.TemporaryDirectory() as folder:  # pyulog 1.0 writes to a path alone
+        out = Path(folder) / "written.ulg"
+        try:
+            ulog.write_ulog(str(out))
+        except Exception:  # pyulog 1.0 cannot write every log it reads (an info's array type)
+            return data
+        return out.read_bytes()
 
 
 #: The mutations that need the base log's record layout untouched (applied first).
