@@ -3,32 +3,33 @@ compiled.
 
 pyulog (PX4's own parser) stays the authority on the format. It reads the data section a
 message at a time in Python: on a 290 MB ULog 12.6 of 13.3 s under cProfile were its loop over
-4.9 M messages, for the few topics altfuse keeps. Here, on an intact file, three compiled walks
-along the message chain (each message's header, its size and type, says where the next begins;
-a walk stops at a message the file ends inside, where pyulog's loop stops: a log cut short),
+4.9 M messages, for the few topics altfuse keeps. Here, on an intact file, compiled walks along
+the message chain (each message's header, its size and type, says where the next begins; a
+walk stops at a message the file ends inside, where pyulog's loop stops: a log cut short),
 each releasing the file's pages as it passes them:
 
-1. the first lists the messages that are not data: the definitions (formats, info,
-   parameters, flag bits), which pyulog reads given those bytes alone, up to the first message
-   of the data section (a subscription or a logged string, where pyulog's definitions loop
-   stops); then the data section's (subscriptions, logged strings, info, parameters,
-   dropouts, syncs: hundreds, where the data messages are millions), parsed in order by
-   pyulog's own message classes;
+1. the first lists the messages that are not data, and stops at a type pyulog does not know.
+   The definitions (flag bits, formats, info, parameters, back to back up to the first
+   message of the data section: a subscription or a logged string, where pyulog's
+   definitions loop stops) pyulog reads given those bytes alone; the data section's others
+   (subscriptions, logged strings, info, parameters, dropouts, syncs: hundreds, where the
+   data messages are millions) are parsed in order by pyulog's own message classes;
 2. the second checks each data message as pyulog's loop would (a message id, a subscription
-   before it, a kept topic's size) and counts the kept topics' messages;
-3. the third copies each kept topic's payloads into its own stretch of one buffer, which
-   pyulog's own ``ULog.Data`` decodes, as it decodes the buffer its loop builds: one
-   ``frombuffer`` per topic instance.
+   before it, a kept topic's size) and counts the kept topics' bytes;
+3. the third, the same loop, copies each kept topic's payloads into its own stretch of one
+   buffer, which pyulog's own ``ULog.Data`` decodes, as it decodes the buffer its loop
+   builds: one ``frombuffer`` per topic instance.
 
-No array of every message is made: the 290 MB log's peak is the kept topics' data and the
-file's pages of one chunk, 1.2x the file (an offset, type, size and id per message took it to
-1.6x). Where the file holds anything pyulog's loop would take as damage or treat in a way of
-its own (an unknown message type, a data message without a message id, of no earlier
-subscription or of another size than its topic's format, a kept topic's message id subscribed
-again, a message pyulog's classes cannot parse, data appended after the file's end, anything
-pyulog printed reading the definitions), :func:`decode` returns None and pyulog reads the file
-whole. Every value it returns is pyulog's (``tests/test_fastulog.py`` compares every field with
-pyulog's whole parse).
+No array of every message is made: a 296 MB log's peak is the kept topics' data and the
+file's pages of one chunk, 1.3x the file (an offset, type, size and id per message had taken a
+290 MB log to 1.6x). Where the file holds anything pyulog's loop would take as damage or treat
+in a way of its own (a type it does not know, other messages among the definitions, a data
+message without a message id, of no earlier subscription or of another size than its topic's
+format, a kept topic's message id subscribed again or its format of padding alone, a message
+pyulog's classes cannot parse, data appended after the file's end, anything pyulog printed
+reading the definitions), or where the pyulog installed lacks one of those classes,
+:func:`decode` returns None and pyulog reads the file whole. Every value it returns is
+pyulog's (``tests/test_fastulog.py`` compares every field with pyulog's whole parse).
 """
 
 from __future__ import annotations
