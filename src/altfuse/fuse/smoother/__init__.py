@@ -247,8 +247,8 @@ values for sensors this log does not have (:func:`not_used`; the commands warn).
 
 Measured (``benchmarks/smoother_accuracy.py``, 210 simulated flights): the lowest RMSE of all
 methods on every one (the closest: the climb with seed 1 and its barometer 7 % high, 0.84 of
-support's); 94.9 % of the true errors within +-2 ``fused_std`` over all, 0.31
-to 1.00 per flight (the lowest on that climb), 83 of the flights within 0.90-0.99; with the
+support's); 95.3 % of the true errors within +-2 ``fused_std`` over all, 0.31
+to 1.00 per flight (the lowest on that climb), 86 of the flights within 0.90-0.99; with the
 barometer in the airflow in a 2 m/s wind along the track (``baro-airflow``) 0.05-0.13 m (the
 mission's wind told against the height smoothed without the barometer, 1.4-2.0 m/s; the
 climb flies one way, where no wind can be told apart from the head), 0.41-0.55 for the
