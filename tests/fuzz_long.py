@@ -4,9 +4,11 @@ Run on demand (about 2 minutes for 2,000 variants on 2 cores):
 
     python tests/fuzz_long.py [--variants 2000] [--seed 1] [--workers 2]
 
-Each variant is a base log (every log in ../shared/logs/ardupilot and sample_logs/, and the PX4
-ULogs in ../shared/logs/px4, which take the byte-level mutations and damage to their values) with
-one to three random mutations (tests/fuzzing.py), fused by the command line (``altfuse fuse``, in
+Each variant is a base log (every log in ../shared/logs/ardupilot and sample_logs/; the PX4
+ULogs in ../shared/logs/px4, which take the byte-level mutations and damage to their values; and
+those DataFlash logs of at most 1 MB written as text, as Mission Planner writes them, which take
+the byte-level mutations and damage to their lines and fields) with one to three random
+mutations (tests/fuzzing.py), fused by the command line (``altfuse fuse``, in
 process) with a random method, in a worker process with a 30 s limit per variant and a 4 GiB
 address-space limit. The allowed outcomes are a valid output or a documented error (exit 1 or 2
 with one line on stderr and no file written). Anything else is a failure, printed with the seed
@@ -21,12 +23,15 @@ every sensor (below the lowest or above the highest) at a tick not flagged ``div
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import resource
 import signal
 import sys
 import tempfile
 import time
 from collections import Counter
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -39,7 +44,8 @@ from click.testing import CliRunner
 
 from altfuse.cli import cli
 from altfuse.guard import GROSS_M
-from fuzzing import MUTATIONS, ULOG_MUTATIONS, Records, variant
+from fuzzing import MUTATIONS, TEXT_MUTATIONS, ULOG_MUTATIONS, Records, variant
+from test_dataflash_text import as_text
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMIT_S = 30
@@ -64,11 +70,11 @@ def _init() -> None:
 def run_one(base: str, names: list[str], seed: int, method: str) -> tuple[str, str]:
     """(outcome kind, detail) for one variant."""
     if base not in _BASES:
-        records = None if _is_ulog(base) else Records(Path(base))
+        records = Records(Path(base)) if _kind(base) == "bin" else None
         _BASES[base] = (Path(base).read_bytes(), records)
     data, records = _BASES[base]
     with tempfile.TemporaryDirectory() as tmp:
-        log = Path(tmp) / ("damaged.ulg" if records is None else "damaged.bin")
+        log = Path(tmp) / f"damaged.{_kind(base)}"
         out = Path(tmp) / "out.csv"
         log.write_bytes(variant(data, records, names, seed))
         signal.alarm(LIMIT_S)
@@ -84,8 +90,17 @@ def run_one(base: str, names: list[str], seed: int, method: str) -> tuple[str, s
         return judge(result.exit_code, result.stderr.strip().splitlines(), out, left)
 
 
-def _is_ulog(base: str) -> bool:
-    return base.lower().endswith(".ulg")
+def _kind(base: str) -> str:
+    """The base log's kind, as its name's suffix: ``ulg``, ``log`` (DataFlash text), ``bin``."""
+    suffix = Path(base).suffix.lower()
+    return suffix[1:] if suffix in (".ulg", ".log") else "bin"
+
+
+#: Each kind's mutations.
+_MUTATIONS = {"ulg": ULOG_MUTATIONS, "log": TEXT_MUTATIONS, "bin": MUTATIONS}
+#: The DataFlash logs also fuzzed as text (written by :func:`test_dataflash_text.as_text`, as
+#: Mission Planner writes them): the sample logs and the small shared ones.
+TEXT_MAX_BYTES = 1_000_000
 
 
 def judge(code: int, lines: list[str], out: Path, left: list[str]) -> tuple[str, str]:
@@ -139,12 +154,42 @@ def main() -> int:
     args = parser.parse_args()
     bases = sorted((ROOT / "sample_logs").glob("*.bin"))
     bases += sorted(p for p in (args.shared / "ardupilot").glob("*") if p.is_file())
+    binary = list(bases)
     bases += sorted((args.shared / "px4").glob("*.ulg"))
+    with tempfile.TemporaryDirectory() as texts:
+        for log in binary:
+            if log.stat().st_size <= TEXT_MAX_BYTES:
+                # pymavlink may fail on a damaged log, and prints what it cannot read of it
+                with contextlib.suppress(Exception), _silenced():
+                    bases.append(as_text(log, Path(texts) / f"{log.stem}.log"))
+        return fuzz(bases, args)
+
+
+@contextlib.contextmanager
+def _silenced() -> Iterator[None]:
+    """Standard output and error closed to everything, compiled code's writes too (pymavlink's
+    indexer prints from C)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with open(os.devnull, "wb") as null:
+        os.dup2(null.fileno(), 1)
+        os.dup2(null.fileno(), 2)
+    try:
+        yield
+    finally:
+        for fd, copy in enumerate(saved, start=1):
+            os.dup2(copy, fd)
+            os.close(copy)
+
+
+def fuzz(bases: list[Path], args: argparse.Namespace) -> int:
+    """The run over ``bases`` (see the module doc); its exit code."""
     rng = np.random.default_rng(args.seed)
     jobs = []
     for _ in range(args.variants):
         base = str(bases[int(rng.integers(len(bases)))])
-        kinds = sorted(ULOG_MUTATIONS if _is_ulog(base) else MUTATIONS)
+        kinds = sorted(_MUTATIONS[_kind(base)])
         names = list(rng.choice(kinds, int(rng.integers(1, 4))))
         jobs.append(
             (
@@ -156,7 +201,8 @@ def main() -> int:
         )
     started = time.perf_counter()
     outcomes: Counter[str] = Counter()
-    by_mutation: dict[str, Counter[str]] = {m: Counter() for m in {**MUTATIONS, **ULOG_MUTATIONS}}
+    every = {**MUTATIONS, **ULOG_MUTATIONS, **TEXT_MUTATIONS}
+    by_mutation: dict[str, Counter[str]] = {m: Counter() for m in every}
     failures = []
     with ProcessPoolExecutor(args.workers, initializer=_init) as pool:
         for job, (kind, detail) in zip(
@@ -176,7 +222,7 @@ def main() -> int:
         print(f"  {n:6d}  {kind}")
     print("by mutation (a variant has 1-3):")
     for name, counts in by_mutation.items():
-        print(f"  {name:<13}" + ", ".join(f"{k} {v}" for k, v in counts.most_common()))
+        print(f"  {name:<16}" + ", ".join(f"{k} {v}" for k, v in counts.most_common()))
     for job, kind, detail in failures[:20]:
         print(
             f"{kind}: base={Path(job[0]).name} mutations={job[1]} seed={job[2]} "

@@ -8,7 +8,8 @@ numeric field, 14 kinds of timestamp damage, and values frozen over a run of rec
 boundaries and layouts come from altfuse's own index of the (undamaged) base log; the
 record-aware mutations apply to the base log's bytes (run them first: a mutation before them
 would move the records). A PX4 ULog takes the byte-level ones and damage to the values of the
-topics altfuse reads (through pyulog, which writes it again).
+topics altfuse reads (through pyulog, which writes it again); a DataFlash text log the
+byte-level ones and damage to its lines, fields, FMT lines and delimiters.
 """
 
 from __future__ import annotations
@@ -360,6 +361,81 @@ def ulog_values(data: bytes, rng: np.random.Generator, _: Records) -> bytes:
         return out.read_bytes()
 
 
+#: What a text log's field may become (:func:`text_fields`).
+_TEXT_VALUES = (b" nan", b" inf", b" -inf", b" 1e308", b" -1e308", b" 99999999999999999999",
+                b" ", b"", b" abc", b" 0x10", b" 1,5", b" 1e", b" --1")  # fmt: skip
+
+
+def _text_lines(data: bytes, rng: np.random.Generator) -> tuple[list[bytes], int, int]:
+    """A text log's lines and a random run of them (its first line and its end)."""
+    lines = data.split(b"\n")
+    i = int(rng.integers(0, len(lines)))
+    return lines, i, min(len(lines), i + int(rng.integers(1, 300)))
+
+
+def text_lines(data: bytes, rng: np.random.Generator, _: Records) -> bytes:
+    """A run of a text log's lines dropped, repeated, moved or made blank."""
+    lines, i, j = _text_lines(data, rng)
+    run, rest = lines[i:j], lines[:i] + lines[j:]
+    how = int(rng.integers(4))
+    if how == 0:
+        lines = rest
+    elif how == 1:
+        lines[i:i] = run * int(rng.integers(1, 4))
+    elif how == 2:
+        at = int(rng.integers(0, len(rest) + 1))
+        lines = rest[:at] + run + rest[at:]
+    else:
+        lines[i:j] = [b""] * len(run)
+    return b"\n".join(lines)
+
+
+def text_fields(data: bytes, rng: np.random.Generator, _: Records) -> bytes:
+    """In a run of a text log's lines, one field each cut short, dropped, doubled or replaced
+    (non-finite, huge, empty, a word)."""
+    lines, i, j = _text_lines(data, rng)
+    for k in range(i, j):
+        parts = lines[k].split(b",")
+        if len(parts) < 2:
+            continue
+        f = int(rng.integers(1, len(parts)))
+        how = int(rng.integers(4))
+        if how == 0:
+            parts[f] = parts[f][: int(rng.integers(0, len(parts[f]) + 1))]
+        elif how == 1:
+            del parts[f]
+        elif how == 2:
+            parts.insert(f, parts[f])
+        else:
+            parts[f] = _TEXT_VALUES[int(rng.integers(len(_TEXT_VALUES)))]
+        lines[k] = b",".join(parts)
+    return b"\n".join(lines)
+
+
+def text_fmt(data: bytes, rng: np.random.Generator, _: Records) -> bytes:
+    """A text log's FMT lines, some of them, with a field replaced (its type, length, name,
+    format or columns)."""
+    lines = data.split(b"\n")
+    fmts = [k for k, line in enumerate(lines) if line.startswith(b"FMT")]
+    for k in rng.choice(fmts, int(rng.integers(1, 4))) if fmts else ():
+        parts = lines[k].split(b",")
+        if len(parts) > 2:
+            f = int(rng.integers(1, len(parts)))
+            parts[f] = (b" 0", b" 255", b" X", b" QQQQQQ", b" ", b" BARO", b" Alt,Alt")[
+                int(rng.integers(7))
+            ]
+            lines[k] = b",".join(parts)
+    return b"\n".join(lines)
+
+
+def text_delimiters(data: bytes, rng: np.random.Generator, _: Records) -> bytes:
+    """A run of a text log's lines with other delimiters, or other line ends."""
+    lines, i, j = _text_lines(data, rng)
+    new = (b",", b";", b"\t", b" ,", b",,", b", \r")[int(rng.integers(6))]
+    lines[i:j] = [line.replace(b", ", new) for line in lines[i:j]]
+    return b"\n".join(lines)
+
+
 #: The mutations that need the base log's record layout untouched (applied first).
 RECORD_AWARE = ("extreme", "timestamps", "frozen", "fmt-type", "fmt-absurd", "fmt-columns",
                 "fmt-redefine", "ulog-values")  # fmt: skip
@@ -388,12 +464,21 @@ ULOG_MUTATIONS: dict[str, Mutation] = {
     **{n: MUTATIONS[n] for n in ("truncate", "flip", "zero", "duplicate", "garbage")},
     "ulog-values": ulog_values,
 }
-_EVERY = {**MUTATIONS, **ULOG_MUTATIONS}
+#: ... and a DataFlash text log: the byte-level ones, and damage to its lines and fields.
+TEXT_MUTATIONS: dict[str, Mutation] = {
+    **{n: MUTATIONS[n] for n in ("truncate", "flip", "zero", "duplicate", "garbage")},
+    "text-lines": text_lines,
+    "text-fields": text_fields,
+    "text-fmt": text_fmt,
+    "text-delimiters": text_delimiters,
+}
+_EVERY = {**MUTATIONS, **ULOG_MUTATIONS, **TEXT_MUTATIONS}
 
 
 def variant(base: bytes, records: Records | None, names: list[str], seed: int) -> bytes:
     """``base`` with the mutations ``names`` (the record-aware first), drawn from ``seed``;
-    ``records``: the base's (None for a ULog, which takes ``ULOG_MUTATIONS`` alone)."""
+    ``records``: the base's (None for a ULog, which takes ``ULOG_MUTATIONS`` alone, and for a
+    text log, which takes ``TEXT_MUTATIONS``)."""
     rng = np.random.default_rng(seed)
     data = base
     order = sorted(
