@@ -97,7 +97,7 @@ def _kind(base: str) -> str:
 
 
 #: Each kind's mutations.
-_MUTATIONS = {"ulg": ULOG_MUTATIONS, "log": TEXT_MUTATIONS, "bin": MUTATIONS}
+_MUTATIONS = {"bin": MUTATIONS, "ulg": ULOG_MUTATIONS, "log": TEXT_MUTATIONS}
 #: The DataFlash logs also fuzzed as text (written by :func:`test_dataflash_text.as_text`, as
 #: Mission Planner writes them): the sample logs and the small shared ones.
 TEXT_MAX_BYTES = 1_000_000
@@ -201,8 +201,7 @@ def fuzz(bases: list[Path], args: argparse.Namespace) -> int:
         )
     started = time.perf_counter()
     outcomes: Counter[str] = Counter()
-    every = {**MUTATIONS, **ULOG_MUTATIONS, **TEXT_MUTATIONS}
-    by_mutation: dict[str, Counter[str]] = {m: Counter() for m in every}
+    by_mutation: dict[str, Counter[str]] = {m: Counter() for k in _MUTATIONS.values() for m in k}
     failures = []
     with ProcessPoolExecutor(args.workers, initializer=_init) as pool:
         for job, (kind, detail) in zip(

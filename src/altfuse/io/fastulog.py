@@ -74,8 +74,9 @@ PYULOG_CLASSES = (
     "MessageDropout",
     "Data",
 )
-#: Why :func:`_walk` stopped: to go on from there, the chain's end, a type pyulog does not know.
-GO_ON, ENDED, UNKNOWN = 0, 1, 2
+#: Why a walk stopped: to go on from there, the chain's end, or a message pyulog would not read
+#: on from (a type it does not know; a data message it would take as damage or stop at).
+GO_ON, ENDED, REFUSED = 0, 1, 2
 _FOUND = 1 << 14  # messages other than data found per call of the walk
 
 
@@ -113,7 +114,7 @@ def _walk(  # noqa: PLR0913 (the bytes, where to walk, the types known, the two 
     of them, where data messages are millions), into the first entries of ``offsets`` and
     ``types``, until ``limit`` or as many as they hold. Their count, where the walk is to go
     on from, and why it stopped there: GO_ON, ENDED (at ``stop``, or at a message the file
-    ends inside: pyulog's loop stops there) or UNKNOWN (a type not ``known``: damage, where a
+    ends inside: pyulog's loop stops there) or REFUSED (a type not ``known``: damage, where a
     zeroed stretch would list a message every 3 bytes)."""
     n = 0
     at = start
@@ -126,7 +127,7 @@ def _walk(  # noqa: PLR0913 (the bytes, where to walk, the types known, the two 
         kind = data[at + 2]
         if kind != _DATA:
             if not known[kind]:
-                return n, at, UNKNOWN
+                return n, at, REFUSED
             if n == offsets.size:
                 return n, at, GO_ON
             offsets[n] = at
@@ -182,18 +183,17 @@ class _File:
     mapped: mmap.mmap
     end: int = 0
 
-    def walk(self, start: int, step: Callable[[int, int], int | None]) -> bool:
-        """``step`` along the chain from ``start`` to its end, a chunk at a time: given where
-        to go on from and the chunk's end, it returns where it stopped, or None where the walk
-        cannot go on (then False); each chunk's pages released once passed."""
-        at, released = start, 0
-        while at < self.end:
-            stopped = step(at, (at // _CHUNK + 1) * _CHUNK)
-            if stopped is None:
-                return False
-            _release(self.mapped, released, stopped)
-            at = released = stopped
-        return True
+    def walk(self, start: int, step: Callable[[int, int], tuple[int, int]]) -> tuple[int, int]:
+        """``step`` along the chain from ``start``, a chunk at a time, while it says GO_ON:
+        given where to go on from and the chunk's end, it returns where it stopped and why
+        (GO_ON, ENDED, REFUSED); each chunk's pages released once passed. Where and why the
+        last step stopped."""
+        at, state = start, GO_ON
+        while state == GO_ON:
+            stopped, state = step(at, (at // _CHUNK + 1) * _CHUNK)
+            _release(self.mapped, at, stopped)
+            at = stopped
+        return at, state
 
 
 def _others(file: _File, stop: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.uint8]] | None:
@@ -205,14 +205,14 @@ def _others(file: _File, stop: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[
     offsets = np.empty(_FOUND, dtype=np.int64)
     types = np.empty(_FOUND, dtype=np.uint8)
     found = [(offsets[:0], types[:0])]
-    at, released, state = FILE_HEADER, 0, GO_ON
-    while state == GO_ON:
-        limit = (at // _CHUNK + 1) * _CHUNK
-        n, at, state = _walk(file.data, at, limit, stop, known, offsets, types)
+
+    def step(at: int, limit: int) -> tuple[int, int]:
+        n, stopped, state = _walk(file.data, at, limit, stop, known, offsets, types)
         found.append((offsets[:n].copy(), types[:n].copy()))
-        _release(file.mapped, released, at)
-        released = at
-    if state == UNKNOWN:
+        return stopped, state
+
+    at, state = file.walk(FILE_HEADER, step)
+    if state == REFUSED:
         return None
     file.end = at
     return np.concatenate([f[0] for f in found]), np.concatenate([f[1] for f in found])
@@ -360,13 +360,14 @@ def _data(
             width[msg_id] = sub.dtype.itemsize
 
     def walk(cursor: npt.NDArray[np.int64], out: npt.NDArray[np.uint8]) -> bool:
-        """One walk along the data messages (:func:`_payloads`) with ``cursor`` and ``out``."""
+        """One walk along the data messages (:func:`_payloads`) with ``cursor`` and ``out``;
+        whether it reached the chain's end."""
 
-        def step(at: int, limit: int) -> int | None:
+        def step(at: int, limit: int) -> tuple[int, int]:
             stopped, intact = _payloads(file.data, at, limit, file.end, since, width, cursor, out)
-            return stopped if intact else None
+            return stopped, (GO_ON if stopped < file.end else ENDED) if intact else REFUSED
 
-        return file.walk(start, step)
+        return file.walk(start, step)[1] == ENDED
 
     sizes = np.zeros(1 << 16, dtype=np.int64)  # the bytes of each kept topic's payloads
     if not walk(sizes, np.empty(0, dtype=np.uint8)):
