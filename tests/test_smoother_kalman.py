@@ -22,7 +22,9 @@ from filterpy.kalman import KalmanFilter, rts_smoother
 from altfuse.fuse.smoother.events import TICK
 from altfuse.fuse.smoother.evidence import HEIGHTS
 from altfuse.fuse.smoother.model import (
+    BARO_SHARED,
     GPS_CORRELATION_S,
+    Q_DRIFT,
     RESET_DATUM,
     RESET_NONE,
     STILL_SIGMA,
@@ -209,7 +211,7 @@ def test_the_kernels_know_every_entry_of_f_but_the_identitys(
     # decays of the bounded states on the diagonal: one missing would be dropped silently
     layout = Layout(np.ones(M), (), drifting=drifting, bounded=bounded)
     structure = layout.structure(use_bias)
-    _, drifts, states, _ = structure
+    _, drifts, states, _, _ = structure
     f = np.eye(layout.n)
     transition(f, 0.37, structure)
     changed = np.nonzero(f - np.eye(layout.n))
@@ -225,6 +227,25 @@ def test_the_kernels_know_every_entry_of_f_but_the_identitys(
         process_noise(q, dt, 0.0, np.full(M, 0.01), structure)
         for c in states:
             assert q[c, c] == pytest.approx(expected, rel=1e-3)
+
+
+def test_the_barometers_share_their_wander_and_q_stays_positive_semi_definite() -> None:
+    # a GPS and three barometers, the first two drifting, the third's offset let loose at a step
+    layout = Layout(np.ones(4), (), drifting=(1, 2), bounded=(0,), shared=(1, 2, 3))
+    q = np.zeros((layout.n, layout.n))
+    dt = 0.2
+    process_noise(q, dt, 0.05, np.array([0.01, 1e-4, 1e-4, 0.5]), layout.structure(True))
+    np.testing.assert_array_equal(q, q.T)
+    assert np.linalg.eigvalsh(q).min() > -1e-18
+    (gps, one, two, three), (rate_one, rate_two) = range(3, 7), layout.drift_pairs[:, 1]
+    # their offsets' increments: the smaller density's share, plus the drifts' shared part
+    assert q[one, two] == pytest.approx(BARO_SHARED * (1e-4 * dt + Q_DRIFT * dt**3 / 3))
+    assert q[one, three] == pytest.approx(BARO_SHARED * 1e-4 * dt)
+    assert q[one, rate_two] == q[rate_one, two] == pytest.approx(BARO_SHARED * Q_DRIFT * dt**2 / 2)
+    assert q[rate_one, rate_two] == pytest.approx(BARO_SHARED * Q_DRIFT * dt)
+    # the GPS's wander is its own, and the third barometer has no drift rate to share
+    assert not q[gps, 4:].any()
+    assert q[three, rate_one] == q[three, rate_two] == 0.0
 
 
 def test_passes_run_at_once_give_the_passes_run_one_by_one() -> None:

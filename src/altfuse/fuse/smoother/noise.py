@@ -13,7 +13,7 @@ import numpy as np
 
 from altfuse.fuse.base import FusionInput, Jump
 from altfuse.fuse.smoother.events import VELOCITY, interval_mean, on_every_event
-from altfuse.fuse.smoother.model import Events
+from altfuse.fuse.smoother.model import BARO_SHARED, Events
 from altfuse.metrics import (
     hold_nearest,
     mad_sigma,
@@ -51,7 +51,7 @@ MAX_SPEED_M_S = 100.0
 #: The spans [s] over which two sensors' agreement is measured, and the least share of the
 #: default random walks it may leave (a floor: two simulated sensors can agree exactly; at
 #: 1e-3 three long truth logs' bands come into the 0.90-0.99 window and two short ones' fall
-#: below it, 0.847 and 0.895, in their climbs: lagging SIM.Alt 8-9 ms there, as the long
+#: below it, 0.841 and 0.898, in their climbs: lagging SIM.Alt 8-9 ms there, as the long
 #: ones do 2-8 ms, which the offsets' wider band over a long flight covers).
 AGREEMENT_LAGS_S = (2.0, 5.0, 10.0, 20.0, 40.0)
 #: ... and the blocks [s] the difference is also averaged over first, AGREEMENT_BLOCK_LAGS
@@ -321,6 +321,8 @@ def bounded_by_agreement(
         for j in (j for j in steady if j != i):
             observed = bound[min(i, j), max(i, j)]
             prior = q_time[i] + q_time[j]
+            if kinds[i] == kinds[j] == "baro":  # less what they share (BARO_SHARED)
+                prior -= 2 * BARO_SHARED * min(q_time[i], q_time[j])
             if math.isfinite(observed) and prior > 0:
                 share = max(observed / prior, Q_AGREEMENT_MIN_SHARE)
                 out[i] = min(out[i], q_time[i] * min(1.0, share))
