@@ -17,6 +17,7 @@ from altfuse.datum import (
     coarser_than_datum,
     detector_takeoffs,
     dynamic_head,
+    lift_off,
     on_clock,
     refer_to_takeoff,
     referred_samples,
@@ -86,6 +87,36 @@ def test_a_real_flight_s_take_off_holds_with_a_larger_take_off_climb() -> None:
     runs = [fuse_log(log, FuseOptions(takeoff_climb_m=climb)) for climb in (1.0, 5.0)]
     assert runs[1].referred.takeoff_s == runs[0].referred.takeoff_s == pytest.approx(243.5)
     assert runs[1].provenance["guard"]["diverged_ticks"] == 0
+
+
+def test_a_gentle_lift_off_ends_the_still_span_before_it() -> None:
+    """A barometer warming 0.01 m/s on the ground; the vehicle lifts at 120 s and climbs 0.2
+    m/s: the 1 m is passed 5 s after the lift-off, and the vehicle was held still until 2 s
+    after it, 0.4 m up. The knee lies at the lift-off, not in the warming."""
+    t = 100.0 + np.arange(500) / 10.0
+    h = np.clip(0.2 * (t - 120.0), 0.0, None)
+    baro = 0.01 * (t - 100.0) + h + np.random.default_rng(2).normal(0, 0.05, t.size)
+    aligned = Aligned(t, ("baro",), ("baro",), baro[:, None], 10.0, 1.0, "union", {})
+    ref = refer_to_takeoff(aligned)
+    assert ref.takeoff_s == pytest.approx(124.5, abs=0.5)  # 1 m above the first seconds'
+    assert ref.liftoff_s == pytest.approx(120.0, abs=0.5)
+    assert ref.on_ground_s is not None
+    assert ref.on_ground_s[1] < 120.0
+    # a warming alone has no knee that turns upwards
+    assert lift_off(t, 0.03 * t, 115.0) == 115.0
+
+
+def test_a_real_hand_flown_take_off_is_not_held_still_after_its_lift_off() -> None:
+    """A real Copter 3.4 log lifts at 91.3 s (its rangefinder), hovers 0.4 m up and passes
+    1 m at 95.4 s: held still until 92.4 s, the smoother stayed 0.3-0.5 m under its GPS,
+    barometer and rangefinder through the flight (0.482 m RMSE from its EKF; coverage 0.003)."""
+    run = fuse_log(shared_log("ardupilot/beastayyg_log_0038_mechanical_failure.bin"))
+    assert run.referred.on_ground_s is not None
+    assert run.referred.on_ground_s[1] < 91.3
+    t, h = run.referred.t, run.referred.h
+    flying = (t > 95.0) & (t < 104.0)
+    below = run.result.fused[flying] < np.nanmin(h[flying], axis=1)
+    assert below.mean() < 0.2  # 0.02; 1.00 held still into the lift-off
 
 
 def test_offset_sensor_keeps_its_weight() -> None:

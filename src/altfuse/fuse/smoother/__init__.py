@@ -249,8 +249,8 @@ values for sensors this log does not have (:func:`not_used`; the commands warn).
 
 Measured (``benchmarks/smoother_accuracy.py``, 210 simulated flights): the lowest RMSE of all
 methods on every one (the closest: the climb with seed 1 and its barometer 7 % high, 0.84 of
-support's); 95.3 % of the true errors within +-2 ``fused_std`` over all, 0.31
-to 1.00 per flight (the lowest on that climb), 86 of the flights within 0.90-0.99; with the
+support's); 95.4 % of the true errors within +-2 ``fused_std`` over all, 0.31
+to 1.00 per flight (the lowest on that climb), 88 of the flights within 0.90-0.99; with the
 barometer in the airflow in a 2 m/s wind along the track (``baro-airflow``) 0.05-0.13 m (the
 mission's wind told against the height smoothed without the barometer, 1.4-2.0 m/s; the
 climb flies one way, where no wind can be told apart from the head), 0.41-0.55 for the
@@ -380,7 +380,7 @@ NIS_CHECK = 2.0
 #: 0.863 and 0.895 below, where the fused height lags 8-9 ms), 0.901-1.000 with 5 ms (8 of 13,
 #: the five others 0.994-1.000: at most 0.010 out of the window, against 0.037), 0.913-1.000
 #: with 6 ms (5 of 13). On altfuse's 210 flights, whose sensors lag 5-12 ms, the band is within
-#: 0.90-0.99 on 86 with 5 ms, below on 26 (101 and 40 with 4 ms).
+#: 0.90-0.99 on 88 with 5 ms, below on 23 (101 and 39 with 4 ms).
 TIMING_SIGMA_S = 0.005
 #: A refused sample's variance in :func:`scale_response`'s pass, whose gate is open: no weight.
 REFUSED_VARIANCE = 1e30
