@@ -111,8 +111,9 @@ def test_a_real_hand_flown_take_off_is_not_held_still_after_its_lift_off() -> No
     1 m at 95.4 s: held still until 92.4 s, the smoother stayed 0.3-0.5 m under its GPS,
     barometer and rangefinder through the flight (0.482 m RMSE from its EKF; coverage 0.003)."""
     run = fuse_log(shared_log("ardupilot/beastayyg_log_0038_mechanical_failure.bin"))
-    assert run.referred.on_ground_s is not None
-    assert run.referred.on_ground_s[1] < 91.3
+    datum = run.provenance["datum"]
+    assert datum["liftoff_s"] == pytest.approx(90.3, abs=0.3)
+    assert datum["still_s"][1] < 91.3
     t, h = run.referred.t, run.referred.h
     flying = (t > 95.0) & (t < 104.0)
     below = run.result.fused[flying] < np.nanmin(h[flying], axis=1)

@@ -107,6 +107,7 @@ def describe_datum(prepared: Prepared) -> dict[str, Any]:
     referred = prepared.referred
     return {
         "takeoff_s": referred.takeoff_s,
+        "liftoff_s": referred.liftoff_s,
         "segments": [segment_record(s) for s in referred.segments],
         "steps": [step_record(s) for s in referred.steps],
         "wind": wind_record(referred.wind),

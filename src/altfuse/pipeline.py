@@ -530,7 +530,10 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
             "meaning": "height above the take-off point [m]",
             "reference": referred.reference,
             "takeoff_s": referred.takeoff_s,
+            "liftoff_s": referred.liftoff_s,
             "ground_window_s": list(referred.ground_window_s),
+            # where the smoother holds the vehicle still at the take-off point (None: nowhere)
+            "still_s": None if referred.on_ground_s is None else list(referred.on_ground_s),
             "segments": [segment_record(s) for s in referred.segments],
             "offsets": [offset_record(o) for o in referred.offsets],
             # where two sensors' heights jump against each other (altfuse.steps)
