@@ -24,9 +24,10 @@ from altfuse.datum import (
 )
 from altfuse.fuse import FusionInput
 from altfuse.fuse.support import SupportParams, fuse_support
+from altfuse.info import _datum_text, describe_datum
 from altfuse.model import Samples, Series
 from altfuse.params import InvalidParameter
-from altfuse.pipeline import FuseOptions, fuse_log
+from altfuse.pipeline import FuseOptions, fuse_log, prepare
 from altfuse.steps import Step
 from conftest import shared_log
 
@@ -114,6 +115,8 @@ def test_a_real_hand_flown_take_off_is_not_held_still_after_its_lift_off() -> No
     datum = run.provenance["datum"]
     assert datum["liftoff_s"] == pytest.approx(90.3, abs=0.3)
     assert datum["still_s"][1] < 91.3
+    said = _datum_text(describe_datum(prepare(run.log, FuseOptions())))
+    assert "  take-off 95.4 s, lift-off 90.3 s; the smoother holds it still 89.4-89.8 s" in said
     t, h = run.referred.t, run.referred.h
     flying = (t > 95.0) & (t < 104.0)
     below = run.result.fused[flying] < np.nanmin(h[flying], axis=1)

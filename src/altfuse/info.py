@@ -102,12 +102,13 @@ def describe(raw: FlightLog) -> dict[str, Any]:
 
 
 def describe_datum(prepared: Prepared) -> dict[str, Any]:
-    """Each source's lag, offset and scale, the take-off, the segments and the steps between
-    sensors."""
+    """Each source's lag, offset and scale, the take-off, its lift-off and the span the smoother
+    holds the vehicle still, the segments and the steps between sensors."""
     referred = prepared.referred
     return {
         "takeoff_s": referred.takeoff_s,
         "liftoff_s": referred.liftoff_s,
+        "still_s": None if referred.on_ground_s is None else list(referred.on_ground_s),
         "segments": [segment_record(s) for s in referred.segments],
         "steps": [step_record(s) for s in referred.steps],
         "wind": wind_record(referred.wind),
@@ -175,6 +176,15 @@ def _datum_text(datum: dict[str, Any]) -> list[str]:
         lag = f"lag {s['lag_s']:.2f} s ({s['lag']}); " if s["lag"] else ""
         scale = f"; scale {s['scale']:.4f} ({s['scale_method']})" if s["scale_method"] else ""
         lines.append(f"  {s['name']:<12} {lag}offset {s['offset_m']:.2f} m ({s['offset']}){scale}")
+    if datum["takeoff_s"] is not None:
+        lift = "" if datum["liftoff_s"] is None else f", lift-off {datum['liftoff_s']:.1f} s"
+        still = datum["still_s"]
+        held = (
+            ""
+            if still is None
+            else f"; the smoother holds it still {still[0]:.1f}-{still[1]:.1f} s"
+        )
+        lines.append(f"  take-off {datum['takeoff_s']:.1f} s{lift}{held}")
     lines += [
         f"  segment {s['start_s']:.1f}-{s['end_s']:.1f} s: datum {s['datum']}"
         for s in datum["segments"]
