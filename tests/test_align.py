@@ -8,7 +8,6 @@ import pytest
 from altfuse.align import (
     Lag,
     _box_means,
-    _searched,
     align,
     cell_means,
     estimate_lag,
@@ -339,20 +338,3 @@ def test_the_lags_box_means_are_numpys_to_the_bit() -> None:
                 np.interp(t - tau + half, rt, integral) - np.interp(t - tau - half, rt, integral)
             ) / box
             np.testing.assert_array_equal(out, numpy)
-
-
-@pytest.mark.parametrize("peak", [0, 3, 37, 74, 150])
-def test_the_lag_search_finds_the_best_of_all_lags_matching_a_third_of_them(peak: int) -> None:
-    # a match that changes slowly with the lag, as over a box's span, its best anywhere, the
-    # search's edges too
-    shares = 1.0 - ((np.arange(151) - peak) / 40.0) ** 2
-    calls: list[int] = []
-
-    def share(j: int) -> float:
-        calls.append(j)
-        return float(shares[j])
-
-    found, best = _searched(151, share)
-    assert best == int(np.argmax(shares)) == peak
-    assert len(calls) == len(set(calls)) < 60  # 151 matched one by one
-    assert np.isfinite(found[max(peak - 1, 0) : peak + 2]).all()  # its neighbours, matched

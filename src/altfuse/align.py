@@ -20,7 +20,7 @@ module decides (ALGORITHMS.md section 1):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Literal, get_args
 
@@ -232,8 +232,6 @@ def align(
 #: simulators' logs; a negative lag is a sensor that leads.
 LAG_RANGE_S = (-0.5, 1.0)
 LAG_STEP_S = 0.01
-#: ... matched at every LAG_COARSE-th of them first (:func:`_searched`).
-LAG_COARSE = 5
 #: Lags are matched on changes over this span [s]: over one 5 Hz GPS interval the barometer's
 #: noise swamps the rate (a log with SIM_BARO_RND 0.2 gave 0.11 s where the truth says 0.21 s).
 LAG_SPAN_S = 1.0
@@ -311,15 +309,14 @@ def estimate_lag(series: Series, reference: Series) -> Lag:
     # interpolated between two samples averages their noise, one on a sample does not, and the
     # fit would favour the lags that fall between samples
     integral = cumulative_integral(rt, rv)
+    explained_at = np.empty(taus.size)
     at = np.empty(t.size)
-
-    def share(j: int) -> float:
-        _box_means(t, float(taus[j]), box, rt, integral, at)
+    for j, tau in enumerate(taus):
+        _box_means(t, float(tau), box, rt, integral, at)
         r = (at[k:] - at[:-k])[apart]
         rr = float(np.dot(r, r))
-        return float(np.dot(d, r)) ** 2 / (rr * energy) if rr > 0 else 0.0
-
-    explained_at, best = _searched(taus.size, share)
+        explained_at[j] = float(np.dot(d, r)) ** 2 / (rr * energy) if rr > 0 else 0.0
+    best = int(np.argmax(explained_at))
     explained = float(explained_at[best])
     tau = float(np.round(taus[best], 3))
     if best in (0, taus.size - 1):
@@ -334,28 +331,6 @@ def estimate_lag(series: Series, reference: Series) -> Lag:
     std = _lag_std(energy * (1.0 - explained_at[best - 1 : best + 2]), d.size, k)
     how = f"changes matched to {reference.name}'s ({explained:.1%} explained, +-{std:.3f} s)"
     return Lag(series.name, reference.name, tau, explained, how, std)
-
-
-def _searched(count: int, explained: Callable[[int], float]) -> tuple[FloatArray, int]:
-    """The share ``explained`` at each of ``count`` lags that the search matched (NaN where
-    it did not), and the best lag's index: every LAG_COARSE-th lag, then each within
-    LAG_COARSE of the best of those, then up the slope to a best whose neighbours (its standard
-    error's) are matched too. The match changes slowly with the lag, over the span of a box:
-    on every shared and sample log the lags, shares and standard errors are those of matching
-    all 151 (the 300 MB log's two searches 0.63 -> 0.26 s)."""
-    found: FloatArray = np.full(count, np.nan)
-
-    def best_of(lags: Iterable[int]) -> int:
-        for j in lags:
-            if np.isnan(found[j]):
-                found[j] = explained(j)
-        return int(np.nanargmax(found))
-
-    coarse = best_of([*range(0, count, LAG_COARSE), count - 1])
-    best = best_of(range(max(coarse - LAG_COARSE, 0), min(coarse + LAG_COARSE + 1, count)))
-    while (climbed := best_of(range(max(best - 1, 0), min(best + 2, count)))) != best:
-        best = climbed
-    return found, best
 
 
 def _box_means(
