@@ -2,18 +2,20 @@
 without GPS, a failed barometer), no IMU records, sensors logged at a low rate, spiked samples,
 a GPS as noisy as a real one, barometers as noisy, copters' barometers reading high in the
 airflow of forward flight as real copters' do, in still air and in a 3 m/s wind, and
-barometers that drift, read every change too large, or flash (light on the sensor).
+barometers that drift, read every change too large, flash (light on the sensor) or dip in a
+copter's rotors' wash on the ground.
 
 Run on demand:  python benchmarks/variant_logs.py [--shared ../shared/logs] [--jobs 2]
 [--variants no-gps no-baro no-imu rate-5 spikes-baro spikes-gps noisy-gps noisy-baro airflow-1
-windy-3 drift-3 scale-5 flash-3]
+windy-3 drift-3 scale-5 flash-3 wash-0.5]
 
 The variants (``tests/variants.py``, which the tests use too): ``no-<kind>``, ``no-imu``,
 ``rate-<hz>``, ``gps-<hz>``, ``spikes-<kind>``, ``noisy-<kind>``, ``step-<kind>``,
-``regain-<kind>``, ``airflow-<k>``, ``windy-<w>``, ``rezero-<s>``, ``drift-<m>``, ``scale-<pct>``,
-``flash-<m>``, joined by ``+`` (``gps-<hz>``, ``step-<kind>``, ``regain-<kind>``, ``rezero-<s>``,
-``drift-<m>``, ``scale-<pct>``, ``flash-<m>`` and ``windy-<w>`` but ``windy-3``, ``drift-3``,
-``scale-5`` and ``flash-3`` not in the default set).
+``regain-<kind>``, ``airflow-<k>``, ``windy-<w>``, ``rezero-<s>``, ``wash-<m>``, ``drift-<m>``,
+``scale-<pct>``, ``flash-<m>``, joined by ``+`` (``gps-<hz>``, ``step-<kind>``,
+``regain-<kind>``, ``rezero-<s>``, ``drift-<m>``, ``scale-<pct>``, ``flash-<m>``, ``windy-<w>``
+and ``wash-<m>`` but ``windy-3``, ``drift-3``, ``scale-5``, ``flash-3`` and ``wash-0.5`` not in
+the default set).
 
 Per log and variant: the smoother's RMSE, maximum error and +-2 sigma coverage against
 ``SIM.Alt``, the checks of the project's bar it fails (``tests/accuracy.py``'s ``verdict``;
@@ -44,7 +46,7 @@ from variants import variant  # noqa: E402
 
 VARIANTS = [
     "no-gps", "no-baro", "no-imu", "rate-5", "spikes-baro", "spikes-gps", "noisy-gps", "noisy-baro",
-    "airflow-1", "windy-3", "drift-3", "scale-5", "flash-3",
+    "airflow-1", "windy-3", "drift-3", "scale-5", "flash-3", "wash-0.5",
 ]  # fmt: skip
 
 

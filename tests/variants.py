@@ -31,6 +31,10 @@ and alignment:
 - ``flash-<m>``: each barometer ``m`` metres higher from half-way through its span, settling
   back with a time constant of 5 s (light on the sensor: "an immediate change in altitude and
   around a 15 second correction", a diydrones.com user's barometer under a lamp);
+- ``wash-<m>``: a copter's barometers ``m`` metres low in its rotors' wash on the ground:
+  from nothing 3 s before the lift-off (the datum's, :func:`altfuse.datum.lift_off`) to all of
+  it 2 s before, back to nothing as the vehicle passes 1 m (the take-off); ArduPilot's EKF3
+  ignores such dips near the ground (``EK3_GND_EFF_DZ``, 4 m by default);
 - ``rezero-<s>``: the barometers 2 m high until ``s`` seconds before the take-off (the
   datum's), where the autopilot re-zeroed them (Copter arming without a home), read as altfuse
   reads such a log (``EV`` ``EKF_ALT_RESET`` there: :func:`altfuse.io.dataflash.rejoined`).
@@ -117,6 +121,20 @@ def _rezeroed(flight: FlightLog, lead_s: float) -> FlightLog:
     return _each(flight, "baro", read)
 
 
+def _washed(flight: FlightLog, metres: float) -> FlightLog:
+    """``wash-<m>`` (the module doc): unchanged but for a copter with a lift-off found."""
+    referred = prepare(flight, FuseOptions()).referred
+    lift, takeoff = referred.liftoff_s, referred.takeoff_s
+    if flight.vehicle != "copter" or lift is None or takeoff is None:
+        return flight
+    times = [lift - 3.0, lift - 2.0, lift, max(takeoff, lift + 0.1)]
+
+    def read(s: Series) -> Series:
+        return replace(s, value=s.value - metres * np.interp(s.t, times, [0.0, 1.0, 1.0, 0.0]))
+
+    return _each(flight, "baro", read)
+
+
 def _drifted(s: Series, _rng: np.random.Generator, per_10_min: str) -> Series:
     """``per_10_min`` metres higher per 10 minutes since the first sample."""
     return replace(s, value=s.value + float(per_10_min) * (s.t - s.t[0]) / 600.0)
@@ -156,6 +174,13 @@ CHANGES: dict[str, tuple[tuple[str, ...] | None, Callable[..., Series]]] = {
 }
 
 
+#: The variants that change the barometers around the datum's take-off (the flight, the figure).
+AROUND_TAKEOFF: dict[str, Callable[[FlightLog, float], FlightLog]] = {
+    "rezero": _rezeroed,
+    "wash": _washed,
+}
+
+
 def variant(flight: FlightLog, how: str, seed: int = 1) -> FlightLog:
     """``flight`` changed as the variant ``how`` says (see the module doc); variants joined by
     ``+`` one after the other, the next with the next seed (``noisy-gps+regain-gps``)."""
@@ -175,8 +200,8 @@ def variant(flight: FlightLog, how: str, seed: int = 1) -> FlightLog:
             if (series := getattr(flight, field)) is not None
         }
         return replace(_each(flight, "gps", lambda s: _thinned(s, rng, arg)), **speeds)
-    if what == "rezero":
-        return _rezeroed(flight, float(arg))
+    if what in AROUND_TAKEOFF:
+        return AROUND_TAKEOFF[what](flight, float(arg))
     if what in ("airflow", "windy"):
         speed, course = flight.ground_speed, flight.ground_course
         if flight.vehicle != "copter" or speed is None or course is None:
