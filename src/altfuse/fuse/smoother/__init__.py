@@ -328,6 +328,7 @@ from altfuse.fuse.smoother.model import (
     landed_events,
     reset_events,
     sensed_climb,
+    sharing_air,
     still_events,
     thermal_regressors,
     unpinned_scales,
@@ -686,7 +687,7 @@ def _layout(
         offset_prior=None if standing else datum_priors(samples, inputs.datum_windows),
         bounded=tuple(i for i, k in enumerate(inputs.kinds) if k == "gps"),
         correlation_s=correlation_s,
-        shared=tuple(i for i, k in enumerate(inputs.kinds) if k == "baro"),
+        shared=sharing_air(inputs.kinds),
     )
     if alone or inputs.speed is None:
         return layout, []

@@ -550,6 +550,11 @@ def process_noise(
                 q[j, i] = q[i, j]
 
 
+def sharing_air(kinds: Sequence[str]) -> tuple[int, ...]:
+    """The sensors whose offsets wander together by BARO_SHARED: the barometers."""
+    return tuple(i for i, k in enumerate(kinds) if k == "baro")
+
+
 #: H of every event, compactly (:func:`measurement_rows`): per series its row without the
 #: regressors' terms, per regressor its state and its sensor, and per regressor its coefficient
 #: at every event.

@@ -13,7 +13,7 @@ import numpy as np
 
 from altfuse.fuse.base import FusionInput, Jump
 from altfuse.fuse.smoother.events import VELOCITY, interval_mean, on_every_event
-from altfuse.fuse.smoother.model import BARO_SHARED, Events
+from altfuse.fuse.smoother.model import BARO_SHARED, Events, sharing_air
 from altfuse.metrics import (
     hold_nearest,
     mad_sigma,
@@ -303,9 +303,10 @@ def bounded_by_agreement(
 ) -> FloatArray:
     """GPS and barometer offsets' random walks no looser than the sensors' agreement allows.
 
-    Two sensors' offsets wander apart at the sum of their densities, which their difference
-    bounds from above (:func:`wander_bound`); each one's can be no larger. A pair that agrees better
-    than the defaults' sum scales both defaults down in their ratio (the prior's preference of a
+    Two sensors' offsets wander apart at the sum of their densities (two barometers' less what
+    they share: :func:`.model.sharing_air`), which their difference bounds from above
+    (:func:`wander_bound`); each one's can be no larger. A pair that agrees better than the
+    defaults' sum scales both defaults down in their ratio (the prior's preference of a
     stable barometer over a wandering GPS stays); never up. In the simulators' logs a GPS and a
     scaled barometer agree to a centimetre over minutes, where the defaults allow a metre and
     gave a fused_std five to twenty times the true error.
@@ -313,6 +314,7 @@ def bounded_by_agreement(
     out: FloatArray = q_time.copy()
     kinds = inputs.kinds
     steady = [i for i, k in enumerate(kinds) if k != "rangefinder"]
+    shared = sharing_air(kinds)
     bound = {
         (i, j): wander_bound(inputs.z[:, i] - inputs.z[:, j], inputs.dt_s)
         for i, j in itertools.combinations(steady, 2)
@@ -321,7 +323,7 @@ def bounded_by_agreement(
         for j in (j for j in steady if j != i):
             observed = bound[min(i, j), max(i, j)]
             prior = q_time[i] + q_time[j]
-            if kinds[i] == kinds[j] == "baro":  # less what they share (BARO_SHARED)
+            if i in shared and j in shared:  # less what they share (BARO_SHARED)
                 prior -= 2 * BARO_SHARED * min(q_time[i], q_time[j])
             if math.isfinite(observed) and prior > 0:
                 share = max(observed / prior, Q_AGREEMENT_MIN_SHARE)
