@@ -46,10 +46,12 @@ M = 2  # sensors: a GPS (its offset bounded) and a barometer, the barometer with
 
 
 def toy(
-    seed: int, accel: bool, spliced: bool = False, count: int = 300
+    seed: int, accel: bool, spliced: bool = False, count: int = 300, washed: bool = False
 ) -> tuple[Events, Layout, np.ndarray]:
     """Events of a simulated flight, the layout, and each event's measurement variance; with
-    ``spliced``, a splice at event 150 (motion, offsets and drift rate back to the prior)."""
+    ``spliced``, a splice at event 150 (motion, offsets and drift rate back to the prior); with
+    ``washed``, the barometer 0.4 m low in a wash over events 30-90 (its random walk's own
+    density there, held to 0 at the first tick after)."""
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.uniform(0.01, 0.2, count))
     t[5] = t[4]  # two events at one instant: no prediction between them
@@ -57,8 +59,15 @@ def toy(
     truth = 3 * np.sin(t / 4)
     r = rng.uniform(0.05, 0.5, count) ** 2
     z = np.where(who >= 0, truth + (who == 1) * 0.3 + rng.normal(0, np.sqrt(r)), np.nan)
+    span = np.zeros(count, dtype=bool)
+    span[30:90] = washed
+    z[span & (who == 1)] -= 0.4
     a = -3 / 16 * np.sin(t / 4) + rng.normal(0, 0.1, count) if accel else np.zeros(count)
     q_state = np.tile([0.01, 1e-4], (count, 1))
+    if washed:
+        q_state = np.column_stack([q_state, np.where(span, 0.2, 0.0)])
+    cleared = np.zeros(count, dtype=bool)
+    cleared[90 + int(np.argmax(who[90:] == TICK))] = washed
     still = np.zeros(count, dtype=bool)
     still[:20] = who[:20] == -1  # ticks on the ground at the datum
     landed = np.zeros(count, dtype=bool)
@@ -71,8 +80,8 @@ def toy(
         reset,
     )  # fmt: skip
     scale = Regressor("scale", 1, np.where(who == 1, truth, 0.0), 0.02)
-    layout = Layout(np.ones(M), (scale,), drifting=(1,), bounded=(0,))
-    return events, layout, r
+    layout = Layout(np.ones(M), (scale,), drifting=(1,), bounded=(0,), washed=(1,) * washed)
+    return replace(events, cleared=cleared), layout, r
 
 
 def filterpy_passes(
@@ -104,11 +113,15 @@ def filterpy_passes(
         if i >= 0:
             row[0, 0] = 1.0
             row[0, 3 + i] = 1.0
-        if i == 1:  # the barometer's scale error, times its height
+        if i == 1:  # the barometer's scale error, times its height, and its wash
             row[0, 3 + M] = layout.regressors[0].coef[k]
+            if layout.washed:
+                row[0, layout.wash] = 1.0
         steps.append((k, f, q, u, row, np.array([ev.z[k]]) if i >= 0 else None, r[k]))
         assert ev.landed is not None
-        for j in (0, 1) if ev.still[k] else (1,) if ev.landed[k] else ():
+        assert ev.cleared is not None
+        held = [0, 1] if ev.still[k] else [1] if ev.landed[k] else []
+        for j in held + ([layout.wash] if ev.cleared[k] else []):
             hold = np.zeros((1, n))
             hold[0, j] = 1.0
             steps.append((k, np.eye(n), np.zeros((n, n)), np.zeros((2, 1)), hold, np.zeros(1),
@@ -149,10 +162,10 @@ def assert_matches(ours: dict[str, np.ndarray], ev: Events, layout: Layout, x, p
     np.testing.assert_allclose(ours["var_row"], var_row, rtol=0, atol=1e-9)
 
 
-@pytest.mark.parametrize("spliced", [False, True])
+@pytest.mark.parametrize(("spliced", "washed"), [(False, False), (True, False), (False, True)])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_forward_filter_is_filterpys_kalman_filter(seed: int, spliced: bool) -> None:
-    ev, layout, r = toy(seed, accel=True, spliced=spliced)
+def test_forward_filter_is_filterpys_kalman_filter(seed: int, spliced: bool, washed: bool) -> None:
+    ev, layout, r = toy(seed, accel=True, spliced=spliced, washed=washed)
     ours = run(ev, r, layout, smooth=False)
     xf, pf, _, _ = filterpy_passes(ev, layout, r)
     assert ours["accepted"][ev.who >= 0].all()
@@ -162,14 +175,20 @@ def test_forward_filter_is_filterpys_kalman_filter(seed: int, spliced: bool) -> 
     assert_matches(ours, ev, layout, xf, pf)
 
 
-@pytest.mark.parametrize("spliced", [False, True])
+@pytest.mark.parametrize(("spliced", "washed"), [(False, False), (True, False), (False, True)])
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_smoother_is_filterpys_rts_smoother(seed: int, spliced: bool) -> None:
+def test_smoother_is_filterpys_rts_smoother(seed: int, spliced: bool, washed: bool) -> None:
     # filterpy's rts_smoother takes no control input: the toy's accelerometer reads 0
-    ev, layout, r = toy(seed, accel=False, spliced=spliced)
+    ev, layout, r = toy(seed, accel=False, spliced=spliced, washed=washed)
     ours = run(ev, r, layout)
     _, _, xs, ps = filterpy_passes(ev, layout, r)
     assert_matches(ours, ev, layout, xs, ps)
+    if washed:  # the barometer's wash found where it was, and 0 where it was held
+        wash = ours["x"][:, layout.wash]
+        assert ev.cleared is not None
+        assert wash[30:90].mean() < -0.05
+        np.testing.assert_allclose(wash[ev.cleared], 0.0, atol=3 * STILL_SIGMA)
+        np.testing.assert_allclose(wash[:30], 0.0, atol=3 * STILL_SIGMA)
     # and smoothing did something: the first state moved from its filtered value
     filtered = run(ev, r, layout, smooth=False)
     assert np.abs(ours["x"][0] - filtered["x"][0]).max() > 1e-3
@@ -211,7 +230,7 @@ def test_the_kernels_know_every_entry_of_f_but_the_identitys(
     # decays of the bounded states on the diagonal: one missing would be dropped silently
     layout = Layout(np.ones(M), (), drifting=drifting, bounded=bounded)
     structure = layout.structure(use_bias)
-    _, drifts, states, _, _ = structure
+    _, drifts, states, _, _, _ = structure
     f = np.eye(layout.n)
     transition(f, 0.37, structure)
     changed = np.nonzero(f - np.eye(layout.n))

@@ -108,6 +108,21 @@ STILL_MARGIN_S = 3.0
 LIFTOFF_MARGIN_S = 0.5
 LIFTOFF_LOOKBACK_S = 10.0
 LIFTOFF_RISE_M = 0.1
+#: A vehicle's barometers may read in the air it stirs near the ground from this long before
+#: its lift-off [s] to this long after its take-off [s] (:attr:`Referred.ground_effect_s`): a
+#: copter's rotor wash raises the static pressure under and around it as its motors spin up,
+#: and its barometers read low until it climbs out of it (a real Copter 3.4 log's dipped 0.4
+#: m as its motors spun up, and a PX4 log's as much). ArduPilot's EKF3 ignores the barometer's
+#: dips near the ground until 5 s after the take-off (``EK3_GND_EFF_DZ``). The smoother
+#: offers the barometers an error there that vanishes at both ends, where the log's evidence
+#: asks for it (:func:`altfuse.fuse.smoother.evidence.wash_evidence`).
+#: Measured on the truth logs' variants (:data:`altfuse.fuse.smoother.model.WASH_SIGMA`): from
+#: 3 s before, the hexa 0.067 -> 0.097 m RMSE and the 10 m sonar 0.088 -> 0.102 with their
+#: barometers 0.5 m low (the variant's wash begins 3 s before); to 5 s after, those 0.011 and
+#: 0.055 but the 8 m rangefinder flight 0.034 -> 0.048, its maximum 0.17 -> 0.22 m (its GPS's
+#: lag, measured against its washed barometers, 0.10 -> 0.23 s, leads the climb out).
+GROUND_EFFECT_BEFORE_S = 5.0
+GROUND_EFFECT_AFTER_S = 3.0
 
 
 Referral = Literal["full", "offset"]
@@ -362,6 +377,17 @@ class Referred:
         ground window before a detected take-off, or the log's first seconds, where the datum
         is defined); None where it was matched to another source instead."""
         return tuple(o.window_s if o.on_ground else None for o in self.offsets)
+
+    @property
+    def ground_effect_s(self) -> tuple[float, float] | None:
+        """The span in which the barometers may read in the air the vehicle stirs near the
+        ground as it takes off (a rotorcraft's wash): from ``GROUND_EFFECT_BEFORE_S`` before
+        its lift-off (or its take-off, where no lift-off was found) to ``GROUND_EFFECT_AFTER_S``
+        after its take-off; None without a take-off found from a ground."""
+        if self.takeoff_s is None or not self.on_real_ground:
+            return None
+        lift = self.takeoff_s if self.liftoff_s is None else self.liftoff_s
+        return (lift - GROUND_EFFECT_BEFORE_S, self.takeoff_s + GROUND_EFFECT_AFTER_S)
 
     @property
     def on_ground_s(self) -> tuple[float, float] | None:

@@ -350,6 +350,7 @@ def _on_clock(
         scale_unknown=tuple(o.scale_unknown for o in referred.offsets),
         scale_known=tuple(o.scale_known for o in referred.offsets),
         landed=_samples(flight.landed),
+        ground_effect_s=() if referred.ground_effect_s is None else (referred.ground_effect_s,),
         steps=_jumps(referred, tentative=False),
         tentative=_jumps(referred, tentative=True),
     )

@@ -115,6 +115,10 @@ class FusionInput:
     landed
         The autopilot's own on-ground verdict (1 on the ground, 0 flying) samples; None if the
         log has none.
+    ground_effect_s
+        The spans [s] in which the barometers may read in the air the vehicle stirs near the
+        ground as it takes off (:attr:`altfuse.datum.Referred.ground_effect_s`); empty where
+        the log has no take-off from a ground.
     scale_unknown
         Per sensor, in ``z``'s order: for a barometer whose scale the datum estimated and did not
         apply, that estimate and its standard error (:attr:`altfuse.datum.Offset.scale_unknown`);
@@ -158,6 +162,7 @@ class FusionInput:
     scale_unknown: tuple[tuple[float, float] | None, ...] = ()
     scale_known: tuple[tuple[float, float] | None, ...] = ()
     landed: Samples | None = None
+    ground_effect_s: tuple[tuple[float, float], ...] = ()
     steps: tuple[Jump, ...] = ()
     tentative: tuple[Jump, ...] = ()
     analysis: FusionInput | None = None

@@ -20,6 +20,7 @@ from altfuse.fuse.smoother.model import (
     scales_agree,
     scales_to_learn,
     scales_to_relearn,
+    wash_depths,
 )
 from altfuse.fuse.smoother.noise import with_jumps
 from altfuse.fuse.smoother.passes import Keep, likelihood, likelihoods, run
@@ -37,6 +38,9 @@ HEARD_SHARE = 0.5
 HEIGHTS = Keep(states=(0,), var_h=False, rows=False, verdicts=frozenset(("loglik",)))
 #: ... and of the pass without the barometers (:func:`smoothed_wind`): the height alone.
 HEIGHTS_ALONE = Keep(states=(0,), var_h=False, rows=False, verdicts=frozenset())
+#: What the wash's test keeps of the pass with the wash: the wash's state and the samples'
+#: log-likelihoods (:func:`wash_evidence`).
+WASH = Keep(var_h=False, rows=False, verdicts=frozenset(("loglik",)))
 #: A sample's variance [m^2] in a pass that does not hear its sensor (:func:`smoothed_wind`).
 UNHEARD_M2 = 1e12
 #: Log-likelihood gain that adds the temperature coefficients: a Bayes factor of 20, "strong"
@@ -66,6 +70,9 @@ STABLE_GAIN = 3.0
 #: tested, the largest first (the others: either sensor's).
 JUMP_GAIN = 3.0
 JUMP_TESTS = 8
+#: Log-likelihood gain that adds the barometers' error in the rotors' wash (:func:`wash_evidence`):
+#: a Bayes factor of 20, as THERMAL_GAIN.
+WASH_GAIN = 3.0
 JUMP_TOGETHER_S = 1.0
 #: The richer model may reject this share more of the samples (the temperature model of the
 #: sample mission rejects 2 of 5,371 more, and explains the rest by 25 in log-likelihood). At
@@ -323,6 +330,48 @@ def smoothed_wind(
         if wind is not None:
             winds.append(wind)
     return max(winds, key=lambda w: w.sigmas, default=None)
+
+
+def wash_evidence(
+    ev: Events,
+    r: FloatArray,
+    layouts: tuple[Layout, Layout],
+    kinds: Sequence[str],
+    spans: Sequence[tuple[float, float]],
+) -> tuple[Layout, dict[str, float | str]]:
+    """The first of ``layouts``, or the second, with the barometers' error in the rotors' wash
+    in ``spans`` (:attr:`.model.Layout.washed`), and the test's record for the metadata
+    (nothing where the second is the first: no barometer, no span).
+
+    The wash is modelled where the log's evidence asks for it, another sensor's heights
+    witness it (:func:`witnessed`) and the barometers read low in it (:func:`.model.wash_depths`:
+    the wash's dip below its ends deeper than its rise above them; a rise is the air of a
+    plane's take-off run, or a climb's). The samples it lets in that the model without it
+    rejects count (:func:`evidence_gain` leaves them out, where two models' rejections would
+    credit the one that explains a departure away): each one at least what it gains over a
+    sample at the gate's edge. Without them the test could not see a wash the model without
+    it rejects, and lost it on four of five truth logs whose barometers read 0.5 m low
+    (``tests/variants.py``, ``wash-0.5``: the 10 m sonar flight's gain -39, with them 65)."""
+    plain, washing = layouts
+    if washing is plain:
+        return plain, {}
+    without = likelihood(ev, r, plain)
+    richer = run(ev, r, washing, keep=replace(WASH, states=(washing.wash,)))
+    gain = evidence_gain(without, richer)
+    if math.isfinite(gain):
+        alone = richer["accepted"] & ~without["accepted"]
+        edge = -0.5 * (np.log(2.0 * np.pi * r[alone]) + ev.gate**2)
+        gain += float(np.sum(richer["loglik"][alone] - edge))
+    dip, rise = wash_depths(ev.t, richer["x"][:, 0], spans)
+    asked = gain > WASH_GAIN
+    seen = witnessed(richer, ev.who, kinds)
+    modelled = asked and seen and dip > rise
+    record = evidence_record("wash", modelled, gain, unwitnessed=asked and not seen)
+    if asked and seen and not modelled:
+        record["baro_wash"] = "not modelled (the barometers read high there, not low)"
+    if modelled:
+        record["baro_wash_m"] = -dip
+    return (washing if modelled else plain), record
 
 
 def thermal_evidence(

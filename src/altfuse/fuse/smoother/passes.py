@@ -42,7 +42,7 @@ from altfuse.fuse.smoother.model import (
     Structure,
     couplings,
     first_height,
-    hold_still,
+    hold,
     measurement_row,
     measurement_rows,
     prior,
@@ -213,14 +213,15 @@ def _measured(
     return ev.t, who, ev.z, np.asarray(r, dtype=np.float64), rows
 
 
-def _marks(ev: Events) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _marks(ev: Events) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The events marked, as the kernels take them: held on the ground at the datum (h = 0,
-    v = 0) and elsewhere standing (v = 0), and those at which the height is let loose early
-    (empty: none)."""
+    v = 0) and elsewhere standing (v = 0), those at which the height is let loose early
+    (empty: none), and those at which the barometers have left the rotors' wash (w = 0)."""
     still = ev.still.astype(np.bool_)
     landed = np.zeros_like(still) if ev.landed is None else ev.landed.astype(np.bool_)
     early = np.zeros(0, dtype=np.bool_) if ev.early is None else ev.early.astype(np.bool_)
-    return still, landed, early
+    cleared = np.zeros_like(still) if ev.cleared is None else ev.cleared.astype(np.bool_)
+    return still, landed, early, cleared
 
 
 def _resets(ev: Events, layout: Layout) -> tuple[np.ndarray, np.ndarray, FloatArray]:
@@ -276,12 +277,12 @@ Buffers = tuple[Kept, Kept]
 Model = tuple[
     tuple[FloatArray, np.ndarray, FloatArray, FloatArray, Rows],
     tuple[FloatArray, FloatArray, FloatArray, Structure, np.ndarray],
-    tuple[np.ndarray, np.ndarray, np.ndarray],
+    tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     float,
     tuple[FloatArray, FloatArray, np.ndarray, np.ndarray, FloatArray],
 ]
 #: The arrays a pass's loops work in (:func:`_arena`): F, Q, B u, the steps' scratch, an event's
-#: row of H, state and covariance, and the rows of H of h and v.
+#: row of H, state and covariance, and the rows of H of h, v and the wash.
 Arena = tuple[
     Transition, FloatArray, FloatArray, Scratch, FloatArray, FloatArray, FloatArray, FloatArray
 ]
@@ -386,7 +387,7 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
     it was not fused), and per event held on the ground the same of its holds. ``model``:
     :func:`_forward`'s arguments; ``arena``: the arrays it works in (:func:`_arena`)."""
     (t, who, z, r, rows), (a, q_accel, q_state, structure, _), marks = model[:3]
-    still, landed, early = marks
+    still, landed, early, cleared = marks
     gate, start = model[3], model[4]
     x, p, sensor_accepted, sensor_r, refused, support, clock = carry
     (xf, pf, updates, holds), keep = kept
@@ -459,8 +460,9 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
                 support[3 + i, 1] += 1.0 / s
             if loglik.size:  # log N(y; 0, S)
                 loglik[k] = -0.5 * (math.log(2 * math.pi * s) + y * y / s)
-        if still[k] or landed[k]:
-            hold_still(x, p, holds[held - first_held if keep else 0], still[k], unit)
+        if still[k] or landed[k] or cleared[k]:
+            pins = (still[k], still[k] or landed[k], cleared[k])
+            hold(x, p, holds[held - first_held if keep else 0], pins, unit)
             held += 1
         if keep:
             assign(xf[slot], x)
@@ -481,9 +483,10 @@ def _first_samples(t: FloatArray, who: np.ndarray, n: int) -> FloatArray:
 @compiled
 def _kept(kept: int, n: int, held: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """What :func:`_forward` keeps for the backward pass: ``kept`` states and covariances, the
-    ``P H'``, ``S`` and ``y`` of ``kept`` events' samples and of ``held`` events' two holds."""
+    ``P H'``, ``S`` and ``y`` of ``kept`` events' samples and of ``held`` events' three holds
+    (:func:`.model.hold`)."""
     states, covariances = np.zeros((kept, n)), np.zeros((kept, n * (n + 1) // 2))
-    return states, covariances, np.zeros((kept, n + 2)), np.zeros((held, 2, n + 2))
+    return states, covariances, np.zeros((kept, n + 2)), np.zeros((held, 3, n + 2))
 
 
 @compiled_step
@@ -638,13 +641,13 @@ def _backward(
     pass, run in a thread a block ahead of the backward one (two cores: about the time it
     cost before). ``passes[1]``: whether to smooth. ``model``: :func:`_forward`'s arguments,
     ``forward`` its checkpoints and buffers."""
-    (t, who, _, _, rows), dynamics, (still, landed, _) = model[:3]
+    (t, who, _, _, rows), dynamics, (still, landed, _, cleared) = model[:3]
     block, smooth = passes
     # a block is filtered again into one buffer while the pass goes back through the other
     checkpoints, (buffers, last_held) = forward
     count, n = t.size, model[4][0].size
     blocks = checkpoints[0].shape[0]
-    events = (t, who, rows, still | landed, model[4][2:4])
+    events = (t, who, rows, still | landed | cleared, model[4][2:4])
     states, keep = kept_of
     kept = int(np.count_nonzero(who == TICK)) if keep.ticks else count
     smoothed = (
@@ -726,8 +729,10 @@ def _arena(
 ) -> Arena:
     """The arrays the loops of a pass over ``n`` states work in (:data:`Arena`), F's entries
     off the diagonal and its decaying states from ``dynamics`` (:data:`Model`'s)."""
-    unit = np.zeros((2, n))
+    unit = np.zeros((3, n))  # the rows of H of h, v and the wash (:func:`.model.hold`)
     unit[0, 0] = unit[1, 1] = 1.0
+    if dynamics[3][5][1] >= 0:
+        unit[2, dynamics[3][5][1]] = 1.0
     fl: Transition = (np.eye(n), dynamics[4], dynamics[3][2])
     q, u, hk, xk, p = np.zeros((n, n)), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, n))
     return fl, q, u, scratch(n), hk, xk, p, unit
@@ -793,7 +798,7 @@ def _back(  # noqa: C901 (one loop: as _filter's, its steps as a helper ran 1.7x
         # back through the event's updates, last first: its holds, then its sample
         if held_at[k]:
             held -= 1
-            for j in (1, 0):
+            for j in (2, 1, 0):
                 record = holds[held, j]
                 if record[n] > 0.0:  # S 0: no hold of this state here
                     adjoint_update(adjoint, unit[j], (record[:n], record[n], record[n + 1]), work)
