@@ -733,7 +733,9 @@ def _wash(
     first = float(ev.t[0])
     walked = sum(wash_density(s) * (first - s[0]) for s in spans if s[0] < first <= s[1])
     prior = math.sqrt(STILL_SIGMA**2 + walked)
-    washing = replace(layout, washed=washed(inputs.kinds, spans), wash_prior=prior)
+    washing = replace(
+        layout, washed=washed(inputs.kinds, spans), wash_spans=tuple(spans), wash_prior=prior
+    )
     return wash_evidence(ev, r, (layout, washing), inputs.kinds, spans)
 
 
@@ -846,7 +848,7 @@ def _gps_stability(
     steady = np.array([kind != "rangefinder" for kind in inputs.kinds])
     stable = ev.q_state.copy()
     offsets = offset_noise(inputs, {}, Q_OFFSET_STABLE_GPS)[np.newaxis, :]
-    stable[:, : steady.size][:, steady] = with_jumps(offsets, steps, ev.t)[:, steady]
+    stable[:, steady] = with_jumps(offsets, steps, ev.t)[:, steady]
     return gps_evidence(ev, r, layout, stable, inputs.kinds)
 
 

@@ -455,6 +455,7 @@ class Layout:
     correlation_s: float = GPS_CORRELATION_S  # ... by a Gauss-Markov process of this time [s]
     shared: tuple[int, ...] = ()  # the sensors whose offsets wander together (BARO_SHARED)
     washed: tuple[int, ...] = ()  # the sensors read in the rotors' wash (one state w, last)
+    wash_spans: tuple[tuple[float, float], ...] = ()  # ... where w walks [s]
     wash_prior: float = STILL_SIGMA  # w's prior sigma [m] (a log begun in the wash: wider)
 
     @property
@@ -488,7 +489,9 @@ class Layout:
             np.array([d for d, i in enumerate(self.drifting) if i in self.shared], dtype=np.int64),
         )
         drifts = self.drift_pairs.astype(np.int64)
-        return use_bias, drifts, bounded, self.correlation_s, shared, (self.sign.size, self.wash)
+        spans = np.array([(lo, hi, wash_density((lo, hi))) for lo, hi in self.wash_spans])
+        wash = (self.wash, spans.reshape(-1, 3))
+        return use_bias, drifts, bounded, self.correlation_s, shared, wash
 
     def adding(self, regressors: Sequence[Regressor]) -> Layout:
         """The same with these regressors too."""
@@ -515,10 +518,10 @@ def couplings(use_bias: bool, drifts: np.ndarray) -> np.ndarray:
 #: F's structure, as the kernels take it: whether the accelerometer's bias is a state, the
 #: drifting offsets' (offset, rate) state pairs, the bounded offsets' states and their
 #: correlation time [s], the offsets that wander together (BARO_SHARED): their states, and
-#: their rows among the drifting pairs; and the sensors' count and the state of the rotors' wash
-#: (-1: none; the sensor states' densities have a column more for it where the events have one).
+#: their rows among the drifting pairs; and the state of the rotors' wash (-1: none) and the
+#: spans it walks in, each (start [s], end [s], density [m^2/s]).
 Structure = tuple[
-    bool, np.ndarray, np.ndarray, float, tuple[np.ndarray, np.ndarray], tuple[int, int]
+    bool, np.ndarray, np.ndarray, float, tuple[np.ndarray, np.ndarray], tuple[int, np.ndarray]
 ]
 
 
@@ -577,25 +580,42 @@ class Events:
 
 
 @compiled_step
+def wash_noise(t: float, structure: Structure) -> float:
+    """The density [m^2/s] of the rotors' wash's random walk over the interval that ends at
+    ``t`` [s]: its span's where ``t`` lies in one (after its start, up to its end), else 0."""
+    for j in range(structure[5][1].shape[0]):
+        lo, hi, density = structure[5][1][j]
+        if lo < t <= hi:
+            return float(density)
+    return 0.0
+
+
+@compiled_step
 def process_noise(
-    q: FloatArray, dt: float, q_accel: float, q_state: FloatArray, structure: Structure
+    q: FloatArray,
+    dt: float,
+    q_accel: float,
+    q_state: FloatArray,
+    structure: Structure,
+    q_wash: float,
 ) -> None:
     """Q over an interval ``dt``, into ``q``: white acceleration of density ``q_accel`` on
     (h, v), the bias's and the sensor states' random walks (``q_state``, one density per
     sensor; a bounded offset's Gauss-Markov increment of the same density at short spans), and
     each drifting offset's integrated random walk; the barometers' increments correlated by
     BARO_SHARED (of the smaller density: ``min(q_i, q_j)`` is a covariance, and ``Q`` stays
-    positive semi-definite where one's offset is let loose at a step)."""
-    use_bias, drifts, bounded, tau, (shared, shared_drifts), (m, wash) = structure
+    positive semi-definite where one's offset is let loose at a step); the rotors' wash's random
+    walk of density ``q_wash`` (:func:`wash_noise`)."""
+    use_bias, drifts, bounded, tau, (shared, shared_drifts), (wash, _) = structure
     q[:] = 0.0
     # white acceleration: [[dt^3/3, dt^2/2], [dt^2/2, dt]] q_a on (h, v)
     q[0, 0], q[0, 1], q[1, 1] = q_accel * dt**3 / 3, q_accel * dt**2 / 2, q_accel * dt
     q[1, 0] = q[0, 1]
     q[2, 2] = Q_BIAS * dt if use_bias else 0.0
-    for i in range(m):
+    for i in range(q_state.size):
         q[3 + i, 3 + i] = q_state[i] * dt
-    if wash >= 0:  # the wash's random walk, of its own density (0 out of the wash)
-        q[wash, wash] = q_state[m] * dt
+    if wash >= 0:  # the wash's random walk, of its own density (0 out of its spans)
+        q[wash, wash] = q_wash * dt
     for c in bounded:
         # q tau / 2 (1 - exp(-2 dt / tau)): the stationary variance q tau / 2, less what the
         # decay carries over of it

@@ -13,7 +13,7 @@ import numpy as np
 
 from altfuse.fuse.base import FusionInput, Jump
 from altfuse.fuse.smoother.events import VELOCITY, interval_mean, on_every_event
-from altfuse.fuse.smoother.model import BARO_SHARED, Events, sharing_air, wash_density, washed
+from altfuse.fuse.smoother.model import BARO_SHARED, Events, sharing_air
 from altfuse.metrics import (
     hold_nearest,
     mad_sigma,
@@ -345,28 +345,14 @@ def state_noise(
     inputs: FusionInput, times: FloatArray, given: Mapping[str, float]
 ) -> tuple[FloatArray, dict[str, float]]:
     """Random-walk densities of the sensor states over each event interval (events, m; one row
-    where they are the same at every event), then the rotors' wash's where the model has it
-    (:func:`.model.washed`: one more column, its density in the datum's spans and 0 elsewhere),
-    and each rangefinder's terrain roughness [m^2/m] by name, for the record.
+    where they are the same at every event), and each rangefinder's terrain roughness [m^2/m] by
+    name, for the record.
 
     ``given`` (by sensor name) overrides. GPS and barometer offsets: :func:`offset_noise`,
     constant. A rangefinder's ground height changes as the vehicle flies over the ground:
     ``q dx`` per distance ``dx`` flown (``q`` by :func:`terrain_noise` against the quietest other
     sensor) plus ``Q_GROUND_STILL`` in time; without a speed, ``Q_OFFSET["rangefinder"]`` in time.
     """
-    q, terrain = _sensor_noise(inputs, times, given)
-    if not washed(inputs.kinds, inputs.ground_effect_s):
-        return q, terrain
-    wash = np.zeros(times.size)
-    for span in inputs.ground_effect_s:
-        wash[(times > span[0]) & (times <= span[1])] = wash_density(span)
-    return np.column_stack([np.broadcast_to(q, (times.size, q.shape[1])), wash]), terrain
-
-
-def _sensor_noise(
-    inputs: FusionInput, times: FloatArray, given: Mapping[str, float]
-) -> tuple[FloatArray, dict[str, float]]:
-    """:func:`state_noise`'s sensors' densities, and the terrain's roughness."""
     z, t, kinds, names, speed = inputs.z, inputs.t, inputs.kinds, inputs.names, inputs.speed
     q_time = offset_noise(inputs, given)
     terrain: dict[str, float] = {}

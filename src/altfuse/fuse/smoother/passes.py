@@ -50,6 +50,7 @@ from altfuse.fuse.smoother.model import (
     regressor_coefficients,
     reset_states,
     transition,
+    wash_noise,
 )
 from altfuse.model import FloatArray
 
@@ -406,7 +407,8 @@ def _filter(  # noqa: C901, PLR0915 (one loop: its steps as a helper taking tupl
             # the accelerometer as the control input: B u = [a dt^2 / 2, a dt, 0, ...]
             u[0], u[1] = 0.5 * a[k] * dt * dt, a[k] * dt
             transition(fl[0], dt, structure)
-            process_noise(q, dt, q_accel[k], q_state[min(k, q_state.shape[0] - 1)], structure)
+            q_row = q_state[min(k, q_state.shape[0] - 1)]
+            process_noise(q, dt, q_accel[k], q_row, structure, wash_noise(t[k], structure))
             predict(x, p, fl, q, u, work)
         if reset[k] > 0:
             # a splice: part of the state returns to the prior (h and v in every row), h at
@@ -731,8 +733,8 @@ def _arena(
     off the diagonal and its decaying states from ``dynamics`` (:data:`Model`'s)."""
     unit = np.zeros((3, n))  # the rows of H of h, v and the wash (:func:`.model.hold`)
     unit[0, 0] = unit[1, 1] = 1.0
-    if dynamics[3][5][1] >= 0:
-        unit[2, dynamics[3][5][1]] = 1.0
+    if dynamics[3][5][0] >= 0:
+        unit[2, dynamics[3][5][0]] = 1.0
     fl: Transition = (np.eye(n), dynamics[4], dynamics[3][2])
     q, u, hk, xk, p = np.zeros((n, n)), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros((n, n))
     return fl, q, u, scratch(n), hk, xk, p, unit
