@@ -116,7 +116,12 @@ def test_a_real_hand_flown_take_off_is_not_held_still_after_its_lift_off() -> No
     assert datum["liftoff_s"] == pytest.approx(90.3, abs=0.3)
     assert datum["still_s"][1] < 91.3
     said = _datum_text(describe_datum(prepare(run.log, FuseOptions())))
-    assert "  take-off 95.4 s, lift-off 90.3 s; the smoother holds it still 89.4-89.8 s" in said
+    assert (
+        "  take-off 95.4 s, lift-off 90.3 s; the smoother holds it still 89.4-89.8 s; "
+        "its barometers' wash tested 85.3-98.4 s"
+    ) in said
+    # from 5 s before the lift-off to 3 s after the take-off
+    assert datum["wash_s"] == pytest.approx([85.3, 98.4], abs=0.05)
     t, h = run.referred.t, run.referred.h
     flying = (t > 95.0) & (t < 104.0)
     below = run.result.fused[flying] < np.nanmin(h[flying], axis=1)

@@ -15,6 +15,7 @@ from altfuse.pipeline import (
     Prepared,
     prepare,
     segment_record,
+    span_record,
     step_record,
     wind_record,
 )
@@ -102,13 +103,15 @@ def describe(raw: FlightLog) -> dict[str, Any]:
 
 
 def describe_datum(prepared: Prepared) -> dict[str, Any]:
-    """Each source's lag, offset and scale, the take-off, its lift-off and the span the smoother
-    holds the vehicle still, the segments and the steps between sensors."""
+    """Each source's lag, offset and scale, the take-off, its lift-off, the span the smoother
+    holds the vehicle still and the one it offers the barometers a wash in, the segments and the
+    steps between sensors."""
     referred = prepared.referred
     return {
         "takeoff_s": referred.takeoff_s,
         "liftoff_s": referred.liftoff_s,
-        "still_s": None if referred.on_ground_s is None else list(referred.on_ground_s),
+        "still_s": span_record(referred.on_ground_s),
+        "wash_s": span_record(referred.ground_effect_s),
         "segments": [segment_record(s) for s in referred.segments],
         "steps": [step_record(s) for s in referred.steps],
         "wind": wind_record(referred.wind),
@@ -184,7 +187,11 @@ def _datum_text(datum: dict[str, Any]) -> list[str]:
             if still is None
             else f"; the smoother holds it still {still[0]:.1f}-{still[1]:.1f} s"
         )
-        lines.append(f"  take-off {datum['takeoff_s']:.1f} s{lift}{held}")
+        wash = datum["wash_s"]
+        washed = (
+            "" if wash is None else f"; its barometers' wash tested {wash[0]:.1f}-{wash[1]:.1f} s"
+        )
+        lines.append(f"  take-off {datum['takeoff_s']:.1f} s{lift}{held}{washed}")
     lines += [
         f"  segment {s['start_s']:.1f}-{s['end_s']:.1f} s: datum {s['datum']}"
         for s in datum["segments"]

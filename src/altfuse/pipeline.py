@@ -462,6 +462,11 @@ def offset_record(o: Offset) -> dict[str, Any]:
     }
 
 
+def span_record(span: tuple[float, float] | None) -> list[float] | None:
+    """A span [s] as the sidecar holds it."""
+    return None if span is None else list(span)
+
+
 def segment_record(segment: Segment) -> dict[str, Any]:
     """A segment of a spliced log, for the provenance: its span, datum and own offsets (none:
     the main segment's)."""
@@ -534,7 +539,10 @@ def provenance(prepared: Prepared, result: FusionResult) -> dict[str, Any]:
             "liftoff_s": referred.liftoff_s,
             "ground_window_s": list(referred.ground_window_s),
             # where the smoother holds the vehicle still at the take-off point (None: nowhere)
-            "still_s": None if referred.on_ground_s is None else list(referred.on_ground_s),
+            "still_s": span_record(referred.on_ground_s),
+            # where the smoother offers the barometers an error in the rotors' wash (whether
+            # it took it: the method's parameters, baro_wash)
+            "wash_s": span_record(referred.ground_effect_s),
             "segments": [segment_record(s) for s in referred.segments],
             "offsets": [offset_record(o) for o in referred.offsets],
             # where two sensors' heights jump against each other (altfuse.steps)
