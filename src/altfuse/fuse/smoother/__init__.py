@@ -718,12 +718,13 @@ def _wash(
     moved the fused height 0.073 m RMSE with it, 0.017 without; mid-flight, 0.006 either way).
     A barometer 1 m low in the wash is such a step, and made a jump (``wash-1``).
 
-    The last test, when the rest of the model is chosen: first, the barometers' scale and
+    The last test, when the rest of the model is chosen. First, the barometers' scale and
     airflow in the climb out of the span were taken for a wash on five of altfuse's simulated
-    missions and climbs (0.040-0.126 m RMSE, up to 0.069 where 0.046), and a real log's
-    barometer stepped at its take-off had its drift chosen beside the wash (0.845 -> 1.146 m
-    from its EKF). Last, the 10 m sonar flight with its barometers 0.5 m low keeps a GPS that
-    the stable model refuses beside the unmodelled wash: 0.088 m RMSE (0.020 first)."""
+    missions and climbs (0.040-0.126 m RMSE, up to 0.069 where 0.046); first and again last,
+    the tests between chose beside a wash the last one then dropped (a real log's barometer
+    stepped at its take-off: its drift, 0.845 -> 1.041 m from its EKF). Last, the 10 m sonar
+    flight with its barometers 0.5 m low keeps a GPS that the stable model refuses beside the
+    unmodelled wash: 0.088 m RMSE (0.020 first)."""
     ev, r = model
     spans = inputs.ground_effect_s
     if not washed(inputs.kinds, spans):

@@ -70,13 +70,13 @@ STABLE_GAIN = 3.0
 #: tested, the largest first (the others: either sensor's).
 JUMP_GAIN = 3.0
 JUMP_TESTS = 8
+JUMP_TOGETHER_S = 1.0
 #: Log-likelihood gain that adds the barometers' error in the rotors' wash (:func:`wash_evidence`):
 #: a Bayes factor of 20, as THERMAL_GAIN.
 WASH_GAIN = 3.0
 #: ... over the flight up to this long after its span's end [s]: beyond it the two models read
 #: the same (on the 300 MB log the test over the whole flight cost 0.9 s of 7.0).
 WASH_EVIDENCE_S = 30.0
-JUMP_TOGETHER_S = 1.0
 #: The richer model may reject this share more of the samples (the temperature model of the
 #: sample mission rejects 2 of 5,371 more, and explains the rest by 25 in log-likelihood). At
 #: 0.1 % a handful of samples at the gate's edge decided: the 9 m sonar flight with its GPS left
@@ -352,9 +352,10 @@ def wash_evidence(
     plane's take-off run, or a climb's). The samples it lets in that the model without it
     rejects count (:func:`evidence_gain` leaves them out, where two models' rejections would
     credit the one that explains a departure away): each one at least what it gains over a
-    sample at the gate's edge. Without them the test could not see a wash the model without
-    it rejects, and lost it on four of five truth logs whose barometers read 0.5 m low
-    (``tests/variants.py``, ``wash-0.5``: the 10 m sonar flight's gain -39, with them 65)."""
+    sample at the gate's edge. Without them the test cannot see a wash the model without it
+    rejects: of five truth logs whose barometers read 0.5 m low (``tests/variants.py``,
+    ``wash-0.5``) it lost two (four at a spread of 1 m; the 10 m sonar flight's gain -39, with
+    them 65)."""
     plain, washing = layouts
     if washing is plain:
         return plain, {}

@@ -656,10 +656,10 @@ Rows = tuple[FloatArray, np.ndarray, FloatArray]
 def measurement_rows(layout: Layout, who: np.ndarray, coef: FloatArray | None = None) -> Rows:
     """H of every event (:data:`Rows`; :func:`measurement_row` makes an event's row): for a
     sample of sensor ``i``, h plus the sensor's offset (GPS, baro) or minus its ground height
-    (rangefinder), plus its regressors' terms; v for a vertical-velocity sample; 0 for a tick.
-    Kept as the rows of each series and the regressors' coefficients (``coef``, where
-    :func:`regressor_coefficients` made them already): the rows of every event cost 44 MB on
-    a 7.4-hour log (seven states)."""
+    (rangefinder), plus its regressors' terms and a barometer's wash (``layout.washed``); v for
+    a vertical-velocity sample; 0 for a tick. Kept as the rows of each series and the
+    regressors' coefficients (``coef``, where :func:`regressor_coefficients` made them
+    already): the rows of every event cost 44 MB on a 7.4-hour log (seven states)."""
     m = layout.sign.size
     base = np.zeros((m + 2, layout.n))  # by series: VELOCITY (-2), TICK (-1), then the sensors
     base[VELOCITY + 2, 1] = 1.0
@@ -736,7 +736,8 @@ def reset_states(layout: Layout) -> np.ndarray:
 def prior(ev: Events, layout: Layout) -> tuple[FloatArray, FloatArray]:
     """The state and covariance before the first event: ``h`` at the first height guess, every
     other state at 0; a loose height and velocity, the offsets' priors (``layout``'s; a bounded
-    offset's no wider than its stationary spread), the regressors' and the drift rates'."""
+    offset's no wider than its stationary spread), the regressors', the drift rates' and the
+    wash's (``layout.wash_prior``)."""
     m = layout.sign.size
     x = np.zeros(layout.n)
     x[0] = ev.h0
