@@ -528,14 +528,15 @@ def detector_takeoffs(landed: Samples | None) -> tuple[float, ...]:
 
 def _ground_before(
     takeoff: float | None,
-    clock: tuple[FloatArray, npt.NDArray[np.bool_], FloatArray],
+    clock: tuple[FloatArray, npt.NDArray[np.bool_], FloatArray, Sequence[FloatArray]],
     ground_s: float,
     climb_m: float,
 ) -> tuple[npt.NDArray[np.bool_], str, bool]:
     """The ground window before ``takeoff`` on the ``clock`` (its ticks, where the reference
-    is valid, the reference smoothed: :func:`_smoothed`), how it was found, and whether the
-    vehicle stood there (empty, and why not, where it did not)."""
-    t, ref_valid, smooth = clock
+    is valid, the reference smoothed: :func:`_smoothed`, and the witnesses of :func:`_moving`),
+    how it was found, and whether the vehicle stood there (empty, and why not, where it did
+    not)."""
+    t, ref_valid, smooth, witnesses = clock
     empty = np.zeros(t.size, dtype=bool)
     if takeoff is None:
         return empty, "first seconds of the log (no take-off found)", False
@@ -545,7 +546,7 @@ def _ground_before(
     window = (t >= end - ground_s) & (t <= end)
     if not (window & ref_valid).any():
         return window, "first seconds of the log (no reference sample before take-off)", False
-    if _moving(smooth, window & ref_valid, climb_m):
+    if _moving(smooth, window & ref_valid, climb_m, witnesses):
         # a log begun in flight: its first seconds are a climb, not a ground
         return empty, "first seconds of the log (moving before take-off was found)", False
     return window, f"ground before take-off at {takeoff:.1f} s", True
@@ -570,11 +571,27 @@ def lift_off(t: FloatArray, smooth: FloatArray, takeoff: float) -> float:
     return knee
 
 
-def _moving(smooth: FloatArray, window: npt.NDArray[np.bool_], climb_m: float) -> bool:
+def _moving(
+    smooth: FloatArray,
+    window: npt.NDArray[np.bool_],
+    climb_m: float,
+    witnesses: Sequence[FloatArray] = (),
+) -> bool:
     """Whether a height (``smooth``: :func:`_smoothed`) changes by ``climb_m`` or more over the
-    ticks of ``window``: the vehicle did not stand there."""
+    ticks of ``window``: the vehicle did not stand there; unless one of ``witnesses`` (other
+    sources' heights, smoothed alike), valid on half the window's ticks at least, changes by
+    less than half of that there: a barometer alone moved (in the rotors' wash as the motors
+    spin up, ``tests/variants.py``'s ``wash-1``: a PX4 simulator log's ground refused and its
+    first seconds taken for it, 0.652 m RMSE)."""
     there = smooth[window]
-    return bool(there.size) and float(np.nanmax(there) - np.nanmin(there)) >= climb_m
+    if not (there.size and float(np.nanmax(there) - np.nanmin(there)) >= climb_m):
+        return False
+    for other in witnesses:
+        seen = other[window]
+        seen = seen[np.isfinite(seen)]
+        if 2 * seen.size >= there.size and float(np.ptp(seen)) < climb_m / 2:
+            return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -760,6 +777,12 @@ def _refer_segment(
     ref_valid = np.isfinite(z[:, ref])
     smooth = _smoothed(z[:, ref], aligned.rate_hz)
     heights = (t, z[:, ref], smooth)
+    # a barometer's ground is witnessed by the other kinds of source (:func:`_moving`)
+    witnesses = [
+        _smoothed(z[:, i], aligned.rate_hz)
+        for i, kind in enumerate(aligned.kinds)
+        if aligned.kinds[ref] == "baro" and kind != "baro"
+    ]
     flagged = next((x for x in told.takeoffs if t[0] <= x <= t[-1]), None)
     # the first rise once the autopilot says the vehicle flies, else the time it says so (a
     # hop lower than ``climb_m``), else the first rise
@@ -769,7 +792,7 @@ def _refer_segment(
         found = [(after, ""), (flagged, " (the autopilot's land detector)"), *found]
     for takeoff, told_by in found:
         window, ground_how, real = _ground_before(
-            takeoff, (t, ref_valid, smooth), ground_s, climb_m
+            takeoff, (t, ref_valid, smooth, witnesses), ground_s, climb_m
         )
         if real:
             ground_how += told_by
