@@ -81,7 +81,7 @@ def toy(
     scale = Regressor("scale", 1, np.where(who == 1, truth, 0.0), 0.02)
     layout = Layout(np.ones(M), (scale,), drifting=(1,), bounded=(0,))
     if washed:  # its random walk over the intervals that end at events 30-89
-        layout = replace(layout, washed=(1,), wash_spans=((float(t[29]), float(t[89])),))
+        layout = replace(layout, shared=(1,), wash_spans=((float(t[29]), float(t[89])),))
     return replace(events, cleared=cleared), layout, r
 
 

@@ -339,7 +339,6 @@ from altfuse.fuse.smoother.model import (
     thermal_regressors,
     unpinned_scales,
     wash_density,
-    washed,
 )
 from altfuse.fuse.smoother.noise import (
     JUMP_HALF_WIDTH_S,
@@ -727,16 +726,14 @@ def _wash(
     unmodelled wash: 0.088 m RMSE (0.020 first)."""
     ev, r = model
     spans = inputs.ground_effect_s
-    if not washed(inputs.kinds, spans):
+    if not (layout.shared and spans):
         return layout, {}
     if any(lo <= step[0] <= hi for step in steps for lo, hi in spans):
         return layout, {"baro_wash": "not tested (a step between sensors lies in its span)"}
     first = float(ev.t[0])
     walked = sum(wash_density(s) * (first - s[0]) for s in spans if s[0] < first <= s[1])
     prior = math.sqrt(STILL_SIGMA**2 + walked)
-    washing = replace(
-        layout, washed=washed(inputs.kinds, spans), wash_spans=tuple(spans), wash_prior=prior
-    )
+    washing = replace(layout, wash_spans=tuple(spans), wash_prior=prior)
     return wash_evidence(ev, r, (layout, washing), inputs.kinds, spans)
 
 

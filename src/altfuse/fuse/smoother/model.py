@@ -181,12 +181,6 @@ def still_events(
     return out if model is None else out & model
 
 
-def washed(kinds: Sequence[str], spans: Sequence[tuple[float, float]]) -> tuple[int, ...]:
-    """The sensors read in the rotors' wash in ``spans`` (the datum's): the barometers, where
-    there is a span."""
-    return sharing_air(kinds) if spans else ()
-
-
 def wash_depths(
     times: FloatArray, wash: FloatArray, spans: Sequence[tuple[float, float]]
 ) -> tuple[float, float]:
@@ -454,13 +448,20 @@ class Layout:
     bounded: tuple[int, ...] = ()  # the sensors whose offset is bounded (a GPS's)
     correlation_s: float = GPS_CORRELATION_S  # ... by a Gauss-Markov process of this time [s]
     shared: tuple[int, ...] = ()  # the sensors whose offsets wander together (BARO_SHARED)
-    washed: tuple[int, ...] = ()  # the sensors read in the rotors' wash (one state w, last)
-    wash_spans: tuple[tuple[float, float], ...] = ()  # ... where w walks [s]
+    # the spans [s] in which the sensors that share their air are read in the rotors' wash
+    # (one state w, the last); empty: no such state
+    wash_spans: tuple[tuple[float, float], ...] = ()
     wash_prior: float = STILL_SIGMA  # w's prior sigma [m] (a log begun in the wash: wider)
 
     @property
     def n(self) -> int:
         return 3 + self.sign.size + len(self.regressors) + len(self.drifting) + bool(self.washed)
+
+    @property
+    def washed(self) -> tuple[int, ...]:
+        """The sensors read in the rotors' wash: those that share their air, where it has a
+        span."""
+        return self.shared if self.wash_spans else ()
 
     @property
     def wash(self) -> int:
