@@ -122,6 +122,29 @@ def test_on_a_slow_clock_a_sensor_s_cells_next_to_each_other_are_no_gap(rate_hz:
     assert np.isnan(out.z[(out.t > 100.0 + 0.5 / rate_hz) & (out.t < 100.0 + 2 / rate_hz), 0]).all()
 
 
+def test_on_a_coarse_clock_a_segment_covers_the_ticks_from_its_first_sample_to_its_last() -> None:
+    """A 10 Hz barometer at 0.5 Hz, in two segments: each cell's mean time lies inside it,
+    past the tick where the samples begin partway through it (95.4 s: the cell of 96 s, its
+    mean at 96.2 s), so the spline through the means left the first and last ticks of every
+    segment without a value (32 of the 39 shared and sample logs' first or last row without
+    a sensor). With ``edge_cells`` the ticks from a segment's first sample to its last have
+    one, its ends extended; a tick before a segment's first sample still has none."""
+    t = np.concatenate([np.arange(95.4, 119.95, 0.1), np.arange(130.3, 152.06, 0.1)])
+    climb = series("baro", t, 2.0 * t)
+    before = align([climb], rate_hz=0.5)
+    after = align([climb], rate_hz=0.5, edge_cells=True)
+    np.testing.assert_allclose(after.t[[0, -1]], [96.0, 152.0])
+    for tick in (96.0, 152.0):
+        assert np.isnan(before.z[before.t == tick, 0]).all()
+    first, second = t[t < 125.0], t[t > 125.0]
+    spanned = (after.t >= first[0] - 1e-6) & (after.t <= first[-1] + 1e-6)  # to the stamps'
+    spanned |= (after.t >= second[0] - 1e-6) & (after.t <= second[-1] + 1e-6)  # resolution
+    np.testing.assert_allclose(after.z[spanned, 0], 2.0 * after.t[spanned], rtol=1e-12)
+    assert np.isnan(after.z[~spanned, 0]).all()  # 120-130 s: 130 s comes before 130.3 s
+    inside = np.isfinite(before.z[:, 0])
+    np.testing.assert_array_equal(after.z[inside, 0], before.z[inside, 0])
+
+
 def test_disjoint_sensors_have_no_overlap() -> None:
     a = series("baro", np.arange(0.0, 5.0, 0.1), np.ones(50))
     b = series("gps", np.arange(10.0, 15.0, 0.2), np.ones(25), kind="gps")

@@ -104,6 +104,24 @@ def test_the_datum_does_not_move_with_the_output_rate(log: str, rate_hz: float) 
     assert np.nanmedian(heights) < 0.3  # a cell's mean against a tick's spline
 
 
+@pytest.mark.parametrize(
+    ("log", "rate_hz"),
+    [("sample", 0.5), ("truth/copter_4.5.0dev_skyrats_rfnd_8m.BIN", 0.5), ("sample", 2.0)],
+)
+def test_a_coarse_clock_s_first_and_last_ticks_are_fused(log: str, rate_hz: float) -> None:
+    """At 0.5 Hz the cell of the first tick averages the samples of its second after the log
+    begins partway through it, their mean time past the tick, and the tick was written with
+    no sensor and no fused height ("none"; 20 of the 33 shared and sample logs that fuse, first
+    or last); now each sensor's column runs from its first sample to its last, and the
+    smoother's height there is the one at that tick of the 10 Hz run."""
+    path = SAMPLE_LOG if log == "sample" else shared_log(log)
+    fine = fuse_log(path)
+    coarse = fuse_log(path, FuseOptions(rate_hz=rate_hz))
+    assert coarse.result.status[[0, -1]].tolist() == ["fused", "fused"]
+    on_fine = np.searchsorted(np.round(fine.referred.t, 6), np.round(coarse.referred.t, 6))
+    np.testing.assert_allclose(coarse.result.fused, fine.result.fused[on_fine], atol=1e-3)
+
+
 @pytest.mark.parametrize("rate_hz", [20.0, 50.0])
 def test_the_datum_does_not_move_with_a_finer_output_rate(rate_hz: float) -> None:
     """On a clock finer than 10 Hz the datum was found on it: this copter's take-off moved at

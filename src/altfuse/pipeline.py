@@ -21,6 +21,7 @@ from altfuse.datum import (
     Segment,
     Track,
     Wind,
+    coarser_than_datum,
     detector_takeoffs,
     on_clock,
     on_datum_clock,
@@ -198,7 +199,8 @@ def _prepare(flight: FlightLog, options: FuseOptions) -> Prepared:
     sensors = [s for s in sensors if s.t.size]
     lags = _lags(flight, sensors) if options.referral == "full" else {}
     sensors = [shift(s, lags[s.name]) if s.name in lags else s for s in sensors]
-    aligned = align(sensors, options.rate_hz, options.max_gap_s, options.span)
+    coarse = coarser_than_datum(options.rate_hz)
+    aligned = align(sensors, options.rate_hz, options.max_gap_s, options.span, edge_cells=coarse)
     fine = aligned
     if not on_datum_clock(options.rate_hz):
         fine = align(sensors, DATUM_RATE_HZ, options.max_gap_s, options.span)
