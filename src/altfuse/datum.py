@@ -1314,12 +1314,12 @@ def _robust_fit(
     precision = np.diag(1.0 / np.asarray(prior, dtype=np.float64) ** 2)
     sigma = math.inf  # the first fit has no prior to weigh against
     for _ in range(4):
-        a, b = design[keep], y[keep]
+        ata, atb = _normal_equations(design, y, keep)
         weight = 0.0 if math.isinf(sigma) else 1.0 / max(sigma, 1e-6) ** 2
-        normal = weight * a.T @ a + precision if weight else a.T @ a
+        normal = weight * ata + precision if weight else ata
         if np.linalg.cond(normal) > 1e12:
             return None
-        coef = np.linalg.solve(normal, (weight or 1.0) * a.T @ b)
+        coef = np.asarray(np.linalg.solve(normal, (weight or 1.0) * atb), dtype=np.float64)
         r = y - design @ coef
         sigma = max(MAD_TO_SIGMA * float(np.median(np.abs(r[keep] - np.median(r[keep])))), 1e-6)
         inside = np.abs(r) <= max(3.0 * sigma, SCALE_MIN_OUTLIER_M)
@@ -1330,8 +1330,28 @@ def _robust_fit(
     if n <= p + 1:
         return None
     residual = max(float(np.sum(r[keep] ** 2)) / (n - p), 1e-12) * per_independent
-    normal = design[keep].T @ design[keep] / residual + precision
+    normal = _normal_equations(design, y, keep)[0] / residual + precision
     return coef, np.sqrt(np.diag(np.linalg.inv(normal)))
+
+
+#: Rows of a fit's design taken at once into its normal equations (:func:`_normal_equations`).
+NORMAL_ROWS = 1 << 16
+
+
+def _normal_equations(
+    design: FloatArray, y: FloatArray, keep: npt.NDArray[np.bool_]
+) -> tuple[FloatArray, FloatArray]:
+    """``A^T A`` and ``A^T y`` over the rows of ``design`` (``A``) that ``keep`` keeps, summed
+    over NORMAL_ROWS rows at a time: the kept rows' copy was the design's size (a ULog's
+    barometer at 97 Hz: 27 MB a copy, two alive at once, in a 300 MB log's wind fit)."""
+    ata: FloatArray = np.zeros((design.shape[1], design.shape[1]))
+    atb: FloatArray = np.zeros(design.shape[1])
+    for start in range(0, y.size, NORMAL_ROWS):
+        rows = slice(start, start + NORMAL_ROWS)
+        a, b = design[rows][keep[rows]], y[rows][keep[rows]]
+        ata += a.T @ a
+        atb += a.T @ b
+    return ata, atb
 
 
 def referred_samples(sensors: Sequence[Series], referred: Referred) -> tuple[Samples, ...]:
