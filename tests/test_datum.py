@@ -10,18 +10,14 @@ import pytest
 from altfuse.align import Aligned
 from altfuse.datum import (
     DATUM_RATE_HZ,
-    Track,
-    Wind,
     _either_search,
-    _robust_fit,
     coarser_than_datum,
-    detector_takeoffs,
-    dynamic_head,
-    lift_off,
     on_clock,
     refer_to_takeoff,
     referred_samples,
 )
+from altfuse.datum.scale import Track, Wind, _robust_fit, dynamic_head
+from altfuse.datum.takeoff import detector_takeoffs, lift_off
 from altfuse.fuse import FusionInput
 from altfuse.fuse.support import SupportParams, fuse_support
 from altfuse.info import _datum_text, describe_datum
@@ -199,7 +195,7 @@ def test_nonsense_parameters_are_refused_by_the_options(
 
 
 def test_rangefinder_tilt_correction() -> None:
-    from altfuse.datum import tilt_correct
+    from altfuse.datum.tilt import tilt_correct
     from altfuse.model import Attitude, Series
 
     t = np.array([0.5, 1.0, 2.0, 9.0])
@@ -221,7 +217,7 @@ def test_rangefinder_tilt_correction() -> None:
 def test_a_rangefinder_tilted_beyond_45_degrees_measures_no_height() -> None:
     """PX4's EKF2 uses no rangefinder tilted more than 45 degrees; there a small error of the
     attitude is a large one of ``d cos(tilt)``."""
-    from altfuse.datum import MAX_TILT_DEG, TILTED, tilt_correct
+    from altfuse.datum.tilt import MAX_TILT_DEG, TILTED, tilt_correct
     from altfuse.model import Attitude, Series
 
     t = np.linspace(0.0, 9.0, 10)
@@ -446,7 +442,8 @@ def test_a_barometer_s_scale_is_found_beside_its_dynamic_pressure() -> None:
     """A climb to 50 m, a cruise there at 8 m/s and back, the barometer 5 % high and reading
     0.8 V^2 / 2g higher (2.6 m at 8 m/s: its static pressure lowered by the air flowing past):
     a fit of the heights alone takes the cruise's rise for a scale (1.078); with the ground speed
-    the head is fitted beside it (:func:`altfuse.datum.dynamic_head`) and the scale is 1.05."""
+    the head is fitted beside it (:func:`altfuse.datum.scale.dynamic_head`) and the scale is
+    1.05."""
     rng = np.random.default_rng(7)
     t = np.arange(0.0, 200.0, 0.1)
     h = np.interp(t, [0, 20, 60, 140, 180, 200], [0, 0, 50, 50, 0, 0])

@@ -20,7 +20,7 @@ from click.testing import CliRunner
 
 from accuracy import verdict
 from altfuse.cli import cli
-from altfuse.datum import Track
+from altfuse.datum.scale import Track
 from altfuse.evaluation import evaluate
 from altfuse.fuse import FusionInput
 from altfuse.fuse.smoother import NIS_CHECK, SmootherParams, fuse_smoother, model_check

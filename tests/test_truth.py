@@ -15,7 +15,7 @@ from pymavlink import DFReader
 from accuracy import verdict
 from altfuse.align import estimate_lag
 from altfuse.cli import cli
-from altfuse.datum import Wind
+from altfuse.datum.scale import Wind
 from altfuse.evaluation import Evaluation, choose_truth, evaluate, evaluate_prepared
 from altfuse.fuse import METHODS
 from altfuse.fuse.smoother import SmootherParams
@@ -323,7 +323,7 @@ def test_a_barometer_that_reads_high_in_forward_flight_is_corrected(name: str) -
     V (``airflow-1``: 1.3 m at 5 m/s, as real copters' barometers read; the 92 m climb's noisy
     barometer too): 0.23-0.65 m RMSE before, the datum's scale taking the cruise at altitude
     for 0.6 % more and the smoother the rest for the GPS's wander. With the dynamic head in the
-    scale's fit and the smoother's coefficient (:func:`altfuse.datum.dynamic_head`),
+    scale's fit and the smoother's coefficient (:func:`altfuse.datum.scale.dynamic_head`),
     0.013-0.019 m: each within the bar on RMSE and maximum, the coefficient within 0.06 of the
     truth; within 0.1 where the barometer's drift is modelled beside it and takes a part of the
     cruise's head as a slow change (the 305 m climb: 0.95 -> 0.92, 0.019 -> 0.018 m RMSE)."""

@@ -18,7 +18,7 @@ and alignment:
   GPS's fix back elsewhere);
 - ``airflow-<k>``: a copter's barometers ``k V^2 / 2g`` higher at its ground speed ``V`` (the
   static pressure lowered by ``k`` times the dynamic pressure, as real copters' barometers
-  read in forward flight: :data:`altfuse.datum.DYNAMIC_PRIOR`; 1.3 m at 5 m/s where ``k`` is
+  read in forward flight: :data:`altfuse.datum.scale.DYNAMIC_PRIOR`; 1.3 m at 5 m/s where ``k`` is
   1); a plane's as logged (its static port: ``k`` 1 would be 108 m at the 3.3 plane's 46 m/s);
 - ``windy-<w>``: the same with ``k`` 1 at the airspeed in a steady wind of ``w`` m/s blowing
   to the east (the ground velocity from the GPS's speed and course, less the wind);
@@ -32,8 +32,8 @@ and alignment:
   back with a time constant of 5 s (light on the sensor: "an immediate change in altitude and
   around a 15 second correction", a diydrones.com user's barometer under a lamp);
 - ``wash-<m>``: a copter's barometers ``m`` metres low in its rotors' wash on the ground:
-  from nothing 3 s before the lift-off (the datum's, :func:`altfuse.datum.lift_off`) to all of
-  it 2 s before, back to nothing as the vehicle passes 1 m (the take-off); ArduPilot's EKF3
+  from nothing 3 s before the lift-off (the datum's, :func:`altfuse.datum.takeoff.lift_off`) to
+  all of it 2 s before, back to nothing as the vehicle passes 1 m (the take-off); ArduPilot's EKF3
   ignores such dips near the ground (``EK3_GND_EFF_DZ``, 4 m by default);
 - ``rezero-<s>``: the barometers 2 m high until ``s`` seconds before the take-off (the
   datum's), where the autopilot re-zeroed them (Copter arming without a home), read as altfuse
@@ -49,7 +49,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from altfuse.datum import Track, Wind
+from altfuse.datum.scale import Track, Wind
 from altfuse.inertial import G
 from altfuse.io.dataflash import rejoined
 from altfuse.model import FlightLog, Samples, Series

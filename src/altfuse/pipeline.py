@@ -19,16 +19,15 @@ from altfuse.datum import (
     Referral,
     Referred,
     Segment,
-    Track,
-    Wind,
     coarser_than_datum,
-    detector_takeoffs,
     on_clock,
     on_datum_clock,
     refer_to_takeoff,
     referred_samples,
-    tilt_correct,
 )
+from altfuse.datum.scale import Track, Wind
+from altfuse.datum.takeoff import detector_takeoffs
+from altfuse.datum.tilt import tilt_correct
 from altfuse.errors import NoUsableSensorsError, ParameterError, Refusal, UnsupportedLogError
 from altfuse.fuse import DEFAULT_METHOD, METHODS, FusionInput, FusionResult, Method, method
 from altfuse.fuse.base import Jump, own_jump
@@ -476,7 +475,7 @@ def segment_record(segment: Segment) -> dict[str, Any]:
 
 
 def wind_record(wind: Wind | None) -> dict[str, Any] | None:
-    """The wind the datum found (:class:`altfuse.datum.Wind`), for the provenance."""
+    """The wind the datum found (:class:`altfuse.datum.scale.Wind`), for the provenance."""
     if wind is None:
         return None
     return {

@@ -51,7 +51,7 @@ from dataclasses import replace
 import numpy as np
 import numpy.typing as npt
 
-from altfuse.datum import MIN_COS_TILT, tilt_at
+from altfuse.datum.tilt import MIN_COS_TILT, tilt_at
 from altfuse.metrics import running_max, running_median, running_white_noise, white_noise_sigma
 from altfuse.model import Attitude, FlightLog, FloatArray, Imu, Series, Vibration
 
@@ -382,7 +382,7 @@ def screen(flight: FlightLog) -> FlightLog:
 def _upright(s: Series, attitude: Attitude | None) -> FloatArray | None:
     """A raw rangefinder distance's factor to the vertical at each sample (``cos(roll)
     cos(pitch)``; NaN where it is tilted beyond MAX_TILT_DEG or the attitude does not cover it,
-    :func:`altfuse.datum.tilt_correct` drops those); None for any other source, or without an
+    :func:`altfuse.datum.tilt.tilt_correct` drops those); None for any other source, or without an
     attitude."""
     if not s.is_raw_rangefinder or attitude is None or attitude.t.size < 2:
         return None

@@ -11,7 +11,7 @@ from typing import Final, Generic, Literal, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from altfuse.datum import Track, Wind
+from altfuse.datum.scale import Track, Wind
 from altfuse.inertial import VerticalAcceleration
 from altfuse.model import (
     SENSOR_KINDS,
@@ -93,10 +93,10 @@ class FusionInput:
         the main segment's: every offset 0 there) or carry the main segment's offsets.
     track
         The GPS's horizontal speed over ground [m/s] and, where the log has it, its course
-        (:class:`altfuse.datum.Track`); None if the log has no speed (``speed`` reads it).
+        (:class:`altfuse.datum.scale.Track`); None if the log has no speed (``speed`` reads it).
     wind
         The steady wind the datum's scale fit found beside the barometers' dynamic pressure
-        (:class:`altfuse.datum.Wind`); None where it found none.
+        (:class:`altfuse.datum.scale.Wind`); None where it found none.
     temperatures
         Each sensor's temperature [degC] samples or None, in ``z``'s order.
     accel

@@ -120,10 +120,10 @@ From the log itself:
   copters' barometers 0.8 and 1.2 (gains 71 and 55: 1.0-1.5 m high at 5 m/s, which one of them
   had given to a temperature coefficient), a PX4 log's with 11 % of its GPS left -0.5 (gain
   14), the other two none; the simulators' fast copters with ``V^2 / 2g`` added to their
-  barometers, 0.23-0.65 -> 0.013-0.019 m RMSE (with :func:`altfuse.datum.dynamic_head` in the
+  barometers, 0.23-0.65 -> 0.013-0.019 m RMSE (with :func:`altfuse.datum.scale.dynamic_head` in the
   datum's scale fit too). In a wind the two legs of a flight out and back feel different
   airspeeds at one ground speed: where the datum's fit found a steady wind ``W`` beside the
-  head (:class:`altfuse.datum.Wind`, from the GPS's course), the head at the airspeed
+  head (:class:`altfuse.datum.scale.Wind`, from the GPS's course), the head at the airspeed
   ``|V - W|`` is offered beside the one at the ground speed, and the likelier taken
   (``baro_dynamic_speed``): the truth logs' copters in a 3 m/s wind (``windy-3``), the hexa
   0.662 -> 0.005 m; handed a wind the air did not blow, the ground speed is taken. Where the
@@ -296,7 +296,7 @@ from functools import partial
 
 import numpy as np
 
-from altfuse.datum import Wind
+from altfuse.datum.scale import Wind
 from altfuse.fuse.base import FUSED, NONE, SINGLE, FusionInput, FusionResult, Jump, joined_jump
 from altfuse.fuse.smoother.events import (
     TICK,

@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from altfuse.datum import Track, Wind, wind_beside
+from altfuse.datum.scale import Track, Wind, wind_beside
 from altfuse.fuse.base import Jump, joined_jump, own_jump
 from altfuse.fuse.smoother.model import (
     Events,
@@ -317,7 +317,7 @@ def smoothed_wind(
     physical: Events, r: FloatArray, layout: Layout, kinds: Sequence[str], track: Track
 ) -> Wind | None:
     """The wind the barometers' readings tell against the height smoothed without them (from
-    the GPS, the accelerometer, a rangefinder: :func:`altfuse.datum.wind_beside`), the best
+    the GPS, the accelerometer, a rangefinder: :func:`altfuse.datum.scale.wind_beside`), the best
     told of theirs; None where none tells it, or without a sensor other than a barometer.
     Where the datum's fit against the GPS alone cannot tell it: a GPS 0.35 m noisy and
     wandering, altfuse's mission in a 2 m/s wind along its track (k 0.4), 0.28-0.43 m RMSE

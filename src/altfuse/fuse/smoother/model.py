@@ -11,7 +11,8 @@ from typing import Literal
 
 import numpy as np
 
-from altfuse.datum import DYNAMIC_PRIOR, GROUND_MAX_SPEED_M_S, dynamic_head
+from altfuse.datum import GROUND_MAX_SPEED_M_S
+from altfuse.datum.scale import DYNAMIC_PRIOR, dynamic_head
 from altfuse.fuse.smoother.compiled import compiled_step
 from altfuse.fuse.smoother.events import TICK, VELOCITY
 from altfuse.fuse.smoother.kalman import assign, innovation, update
@@ -33,7 +34,7 @@ THERMAL_PRIOR = 0.5
 SCALE_PRIOR = 0.05
 SCALE_AGREE_SIGMAS = 2.0
 #: A scale the datum applied with a standard error above this [-] (it applies up to
-#: ``altfuse.datum.MAX_SCALE_STD``) the smoother learns again from the barometer's readings
+#: ``altfuse.datum.scale.MAX_SCALE_STD``) the smoother learns again from the barometer's readings
 #: referred by their offset only, and keeps where the log's evidence takes it
 #: (:func:`.evidence.relearnt_scales`): the datum's fit sees the GPS alone, the smoother the
 #: accelerometer too. Measured: altfuse's hovers 240 m high with the barometer 7 % high (the
@@ -334,7 +335,7 @@ def dynamic_regressors(
     speed: Samples, kinds: Sequence[str], events: tuple[FloatArray, np.ndarray]
 ) -> list[Regressor]:
     """A dynamic-pressure coefficient for each barometer (prior DYNAMIC_PRIOR): ``coef`` its
-    dynamic head ``V^2 / 2g`` [m] at its samples (:func:`altfuse.datum.dynamic_head`, ``V``
+    dynamic head ``V^2 / 2g`` [m] at its samples (:func:`altfuse.datum.scale.dynamic_head`, ``V``
     the ``speed``: an airspeed, or the ground speed). ``events``: their times and series."""
     times, who = events
     out = []

@@ -406,7 +406,7 @@ def with_jumps(
     Measured on the truth logs with their barometers flashed 1, 3, -3 and 10 m half-way
     (settling back over 15 s, ``tests/variants.py``), each jump told by its sensors' own
     heights, before the datum's scale fit left the settling out (since, 12, 11, 13 and 11:
-    :func:`altfuse.datum.baro_scales`): within the bar on RMSE and maximum on 10, 9, 10 and 4
+    :func:`altfuse.datum.scale.baro_scales`): within the bar on RMSE and maximum on 10, 9, 10 and 4
     of 13, where 8, 7, 7 and 6 without the settling; the worst RMSE over the bar's 9.1 times
     where 101 times (the agricultural copter's 10 m flash: its barometers, moved back by their
     jump, read 9 m low once settled, and were followed where its GPS, one value to the log's
