@@ -20,6 +20,7 @@ from altfuse.evaluation import Evaluation, choose_truth, evaluate, evaluate_prep
 from altfuse.fuse import METHODS
 from altfuse.fuse.smoother import SmootherParams
 from altfuse.fuse.smoother.model import LEARN_SCALE_STD
+from altfuse.inertial import VIBE_ACCEPTABLE_M_S2
 from altfuse.info import describe_datum
 from altfuse.io import read_log
 from altfuse.metrics import coverage
@@ -189,22 +190,29 @@ def test_info_shows_the_clock_fix_the_lag_the_scale_and_the_segments() -> None:
 
 
 @pytest.mark.parametrize(
-    ("name", "source"),
+    ("name", "source", "clips", "clipped_at"),
     [
-        ("copter_3.4dev_gusbus4_climb305m.BIN", "VIBE[0].Clip0"),  # Copter 3.4: Clip0..2
-        ("copter_4.5.0dev_skyrats_rfnd_8m.BIN", "VIBE[0].Clip"),  # 4.x: one record per IMU
+        ("copter_3.4dev_gusbus4_climb305m.BIN", "VIBE[0].Clip0", 0, []),  # Copter 3.4: Clip0..2
+        # 4.x: one record per IMU; two samples clipped at one VIBE record, as it touched down
+        ("copter_4.5.0dev_skyrats_rfnd_8m.BIN", "VIBE[0].Clip", 2, [148.707]),
     ],
 )
-def test_gps_vertical_velocity_and_accelerometer_quality_reach_the_methods(
-    name: str, source: str
+def test_gps_vertical_velocity_and_the_accelerometer_s_health_reach_the_methods(
+    name: str, source: str, clips: int, clipped_at: list[float]
 ) -> None:
     prepared = prepare_log(shared_log(f"truth/{name}"), FuseOptions())
     inputs = fusion_input(prepared, METHODS["smoother"], "smoother")
-    assert inputs.vibration is not None
-    assert inputs.vibration.source == source
-    assert inputs.vibration.level.shape == (inputs.vibration.t.size, 3)
-    assert np.all(np.diff(inputs.vibration.clips) >= 0)  # a cumulative count
-    assert inputs.imu_rate_hz == pytest.approx(25.0, rel=0.2)
+    vibration = prepared.log.vibration
+    assert vibration is not None
+    assert vibration.source == source
+    assert vibration.level.shape == (vibration.t.size, 3)
+    assert np.all(np.diff(vibration.clips) >= 0)  # a cumulative count
+    assert inputs.accel is not None
+    health = inputs.accel.record["vibration"]  # in the provenance, beside its source
+    assert health["source"] == source
+    assert health["max_level_m_s2"] < VIBE_ACCEPTABLE_M_S2  # a simulator's quiet IMU
+    assert health["clipped_samples"] == clips
+    assert health["clipped_at_s"] == clipped_at
     # GPS.VZ is logged down; up, and moved by the GPS's lag, it is the GPS's own climb rate
     velocity = inputs.gps_velocity_up
     assert velocity is not None

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Literal, get_args
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -34,7 +34,6 @@ from altfuse.model import FloatArray, SensorKind, Series, brief_repr, sensor_kin
 from altfuse.spline import cubic_spline
 
 Span = Literal["union", "overlap"]
-SPANS: tuple[Span, ...] = get_args(Span)
 #: Most ticks a clock may have: ``TICKS_PER_SAMPLE`` per sample of all the sources, at least
 #: ``MIN_TICK_CAP`` (a day at 10 Hz is 864,000). Timestamps the screening let through must not
 #: allocate a clock of millions of empty ticks (a log's last records 970,000 s later gave a

@@ -14,6 +14,13 @@ averaged into each tick's cell (a box filter that also blunts single-sample spik
 Paper B subtracts the at-rest reading; here it is the median of ``a_up`` over the datum's ground
 window (the vehicle still, on the ground or in a steady hover). The median, because that window
 can end in the first second of a gentle take-off.
+
+How far to trust the accelerometer, as the autopilot logged it (VIBE), goes into the record
+beside it (:func:`vibration_record`): ArduPilot's guidance ("Measuring Vibration") takes
+vibration levels below ``VIBE_ACCEPTABLE_M_S2`` as normally acceptable and above
+``VIBE_PROBLEM_M_S2`` as nearly always a problem for altitude hold, and clipping (a sample at
+the sensor's 16 g) as acceptable in small numbers at a hard landing, a serious problem where it
+keeps rising.
 """
 
 from __future__ import annotations
@@ -25,9 +32,16 @@ import numpy as np
 
 from altfuse.align import cell_means
 from altfuse.metrics import cumulative_integral
-from altfuse.model import Attitude, FloatArray, Imu, Samples, Series, brief_repr
+from altfuse.model import Attitude, FloatArray, Imu, Samples, Series, Vibration, brief_repr
 
 G = 9.80665  # standard gravity [m/s²]
+#: ArduPilot's bounds on the logged vibration levels [m/s²] (VIBE.VibeX/Y/Z, the standard
+#: deviation of the accelerometer's output): below the first normally acceptable, above the
+#: second nearly always a problem for position and altitude hold.
+VIBE_ACCEPTABLE_M_S2 = 30.0
+VIBE_PROBLEM_M_S2 = 60.0
+#: The instants of clipping the record lists (the first of them).
+CLIPPED_LISTED = 10
 
 
 @dataclass(frozen=True)
@@ -119,3 +133,24 @@ def on_clock(t: FloatArray, a: FloatArray, grid: FloatArray, rate_hz: float) -> 
     keep = (idx >= 0) & (idx < grid.size)
     out[idx[keep]] = ac[keep]
     return out
+
+
+def vibration_record(vibration: Vibration) -> dict[str, Any]:
+    """The accelerometer's health over the log for the provenance: its largest vibration level
+    [m/s²] (of the three axes), how long [s] it stood above VIBE_ACCEPTABLE_M_S2 and above
+    VIBE_PROBLEM_M_S2 (each sample counting until the next; the last, the median interval),
+    how many of its samples clipped (the rise of the cumulative count, which a reboot resets:
+    only the rises count) and when (the first CLIPPED_LISTED samples at which the count rose)."""
+    t, level = vibration.t, np.max(vibration.level, axis=1)
+    step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    held = np.diff(t, append=t[-1] + step) if t.size else np.zeros(0)
+    rises = np.diff(vibration.clips, prepend=vibration.clips[:1]) if t.size else np.zeros(0)
+    clipped = t[rises > 0]
+    return {
+        "source": vibration.source,
+        "max_level_m_s2": float(level.max()) if t.size else None,
+        "above_acceptable_s": float(held[level > VIBE_ACCEPTABLE_M_S2].sum()),
+        "above_problem_s": float(held[level > VIBE_PROBLEM_M_S2].sum()),
+        "clipped_samples": int(rises[rises > 0].sum()),
+        "clipped_at_s": [round(float(x), 3) for x in clipped[:CLIPPED_LISTED]],
+    }

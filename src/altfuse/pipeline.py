@@ -36,6 +36,7 @@ from altfuse.inertial import (
     VerticalAcceleration,
     referred_vertical_acceleration,
     velocity_integral,
+    vibration_record,
 )
 from altfuse.io import read_log
 from altfuse.memory import release_free_memory
@@ -299,6 +300,9 @@ def fusion_input(prepared: Prepared, chosen: Method[Any], name: str = "") -> Fus
         accel = referred_vertical_acceleration(
             flight.imu, flight.attitude, decided.t, rate, decided.ground_window_s
         )
+        if flight.vibration is not None:  # how far to trust it, for the provenance
+            vibration = vibration_record(flight.vibration)
+            accel = replace(accel, record={**accel.record, "vibration": vibration})
     if "accel" in chosen.requires and accel is None:
         missing = [n for n, v in (("IMU", flight.imu), ("ATT", flight.attitude)) if v is None]
         others = ", ".join(m for m, f in METHODS.items() if "accel" not in f.requires)
@@ -327,10 +331,6 @@ def _on_clock(
     span = (referred.t[0] - dt, referred.t[-1] + dt)
     samples = tuple(_within(s, span) for s in referred_samples(prepared.sensors, referred))
     velocity = None if velocity is None else _within(velocity, span)
-    imu_rate = None
-    if flight.imu is not None and flight.imu.t.size > 1:
-        step = float(np.median(np.diff(flight.imu.t)))
-        imu_rate = 1.0 / step if step > 0 else None
     return FusionInput(
         t=referred.t,
         z=referred.h,
@@ -345,8 +345,6 @@ def _on_clock(
         temperatures=tuple(_samples(temps.get(n)) for n in referred.names),
         accel=accel,
         gps_velocity_up=velocity,
-        vibration=flight.vibration,
-        imu_rate_hz=imu_rate,
         datum_windows=referred.datum_windows,
         scale_unknown=tuple(o.scale_unknown for o in referred.offsets),
         scale_known=tuple(o.scale_known for o in referred.offsets),

@@ -18,7 +18,6 @@ from altfuse.model import (
     FloatArray,
     Samples,
     SensorKind,
-    Vibration,
     brief_repr,
     sensor_name,
 )
@@ -105,9 +104,6 @@ class FusionInput:
     gps_velocity_up
         The first GPS's vertical velocity [m/s, up] samples, moved by that GPS's lag; None if
         the log has none.
-    vibration, imu_rate_hz
-        The accelerometer's logged vibration and clipping (VIBE), and the rate [Hz] at which
-        its samples are logged: how far to trust it; None if the log cannot tell.
     datum_windows
         Each sensor's span [s] over which its offset was measured standing at the take-off
         point, in ``z``'s order; None where it was not (matched to another sensor, a log
@@ -156,8 +152,6 @@ class FusionInput:
     temperatures: tuple[Samples | None, ...] = ()
     accel: VerticalAcceleration | None = None
     gps_velocity_up: Samples | None = None
-    vibration: Vibration | None = None
-    imu_rate_hz: float | None = None
     datum_windows: tuple[tuple[float, float] | None, ...] = ()
     scale_unknown: tuple[tuple[float, float] | None, ...] = ()
     scale_known: tuple[tuple[float, float] | None, ...] = ()

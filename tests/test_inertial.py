@@ -1,0 +1,38 @@
+"""The accelerometer's health as the provenance records it
+(:func:`altfuse.inertial.vibration_record`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from altfuse.inertial import VIBE_ACCEPTABLE_M_S2, VIBE_PROBLEM_M_S2, vibration_record
+from altfuse.model import Vibration
+
+
+def test_the_vibration_record_counts_time_over_the_bounds_and_only_the_clip_counts_rises() -> None:
+    t = np.arange(20) * 0.1  # VIBE at 10 Hz
+    level = np.full((20, 3), 5.0)
+    level[4:9, 2] = VIBE_ACCEPTABLE_M_S2 + 1.0  # 0.5 s above the first bound, on one axis
+    level[6:8, 0] = VIBE_PROBLEM_M_S2 + 5.0  # 0.2 s of them above the second
+    # cumulative: 3 clips at 0.5 s, 2 at 0.9 s, a reboot's reset to 0, 4 more at 1.5 s
+    clips = np.array([0] * 5 + [3] * 4 + [5] * 3 + [0] * 3 + [4] * 5, dtype=float)
+    record = vibration_record(Vibration("VIBE[0].Clip0", t, level, clips))
+    assert record["max_level_m_s2"] == VIBE_PROBLEM_M_S2 + 5.0
+    assert record["above_acceptable_s"] == pytest.approx(0.5)
+    assert record["above_problem_s"] == pytest.approx(0.2)
+    assert record["clipped_samples"] == 3 + 2 + 4  # the reset's drop is no clip
+    assert record["clipped_at_s"] == [0.5, 0.9, 1.5]
+
+
+def test_a_quiet_accelerometer_has_nothing_to_record_but_its_level() -> None:
+    t = np.arange(5) * 0.1
+    record = vibration_record(Vibration("VIBE[0].Clip", t, np.full((5, 3), 2.0), np.zeros(5)))
+    assert record == {
+        "source": "VIBE[0].Clip",
+        "max_level_m_s2": 2.0,
+        "above_acceptable_s": 0.0,
+        "above_problem_s": 0.0,
+        "clipped_samples": 0,
+        "clipped_at_s": [],
+    }
