@@ -493,7 +493,9 @@ def test_info_text_and_json() -> None:
     assert "gps" in result.stdout
     assert "RFND.Dist" in result.stdout
     assert "sim (SIM.Alt" in result.stdout
+    assert "vibration: not logged" in result.stdout  # altfuse's own logs have no VIBE
     data = json.loads(run("info", SAMPLE_LOG, "--json").stdout)
+    assert data["vibration"] is None
     assert [s["name"] for s in data["sensors"]] == ["gps", "baro", "rangefinder"]
     gps = data["sensors"][0]
     assert gps["rate_hz"] == pytest.approx(5.0)

@@ -3,11 +3,16 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+from altfuse.cli import cli
 from altfuse.inertial import VIBE_ACCEPTABLE_M_S2, VIBE_PROBLEM_M_S2, vibration_record
 from altfuse.model import Vibration
+from conftest import shared_log
 
 
 def test_the_vibration_record_counts_time_over_the_bounds_and_only_the_clip_counts_rises() -> None:
@@ -36,3 +41,17 @@ def test_a_quiet_accelerometer_has_nothing_to_record_but_its_level() -> None:
         "clipped_samples": 0,
         "clipped_at_s": [],
     }
+
+
+def test_info_tells_a_crash_s_vibration_and_clipping() -> None:
+    """A real Copter 3.4 log of a mechanical failure: its VIBE peaks at 69 m/s^2 and its first
+    accelerometer clips 28 times within 0.6 s."""
+    log = str(shared_log("ardupilot/beastayyg_log_0036_mechanical_failure.bin"))
+    text = CliRunner().invoke(cli, ["info", log]).stdout
+    assert (
+        "vibration: up to 69.0 m/s² (5.1 s above 30, 0.4 s above 60), 28 samples clipped "
+        "(first at 373.1 s)"
+    ) in text
+    health = json.loads(CliRunner().invoke(cli, ["info", log, "--json"]).stdout)["vibration"]
+    assert health["clipped_samples"] == 28
+    assert health["clipped_at_s"] == [373.076, 373.177, 373.579, 373.679]

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from altfuse.errors import AltfuseError
+from altfuse.inertial import VIBE_ACCEPTABLE_M_S2, VIBE_PROBLEM_M_S2, vibration_record
 from altfuse.model import FlightLog, Series, counted
 from altfuse.pipeline import (
     FuseOptions,
@@ -91,6 +92,8 @@ def describe(raw: FlightLog) -> dict[str, Any]:
         "attitude": None
         if flight.attitude is None
         else {"source": flight.attitude.source, "samples": int(flight.attitude.t.size)},
+        # how far to trust the accelerometer, as the autopilot logged it (VIBE)
+        "vibration": None if flight.vibration is None else vibration_record(flight.vibration),
         "reader": flight.reader,
         "skipped_bytes": flight.skipped_bytes,
         "damaged": list(flight.damaged),
@@ -161,7 +164,8 @@ def as_text(summary: dict[str, Any]) -> list[str]:
     lines += [
         f"references (never fused): {refs or 'none'}",
         f"IMU: {imu['samples'] if imu else 'no'} samples; "
-        f"attitude: {att['samples'] if att else 'no'} samples",
+        f"attitude: {att['samples'] if att else 'no'} samples; "
+        f"vibration: {_vibration_text(summary['vibration'])}",
         f"skipped bytes: {summary['skipped_bytes']}",
         f"dropped samples: {summary['samples_dropped_total']} of the altitude sources "
         f"({of_sensors} implausible; the others filtered by the reader or beyond a "
@@ -169,6 +173,19 @@ def as_text(summary: dict[str, Any]) -> list[str]:
         *([f"dropped as implausible from the other inputs: {inputs}"] if inputs else []),
     ]
     return lines + [f"note: {note}" for note in summary["notes"]]
+
+
+def _vibration_text(vibration: dict[str, Any] | None) -> str:
+    """The accelerometer's health (:func:`altfuse.inertial.vibration_record`) in a few words."""
+    if vibration is None:
+        return "not logged"
+    clipped = vibration["clipped_samples"]
+    return (
+        f"up to {vibration['max_level_m_s2']:.1f} m/s² ({vibration['above_acceptable_s']:.1f} s "
+        f"above {VIBE_ACCEPTABLE_M_S2:g}, {vibration['above_problem_s']:.1f} s above "
+        f"{VIBE_PROBLEM_M_S2:g}), {clipped} sample{'' if clipped == 1 else 's'} clipped"
+        + (f" (first at {vibration['clipped_at_s'][0]:.1f} s)" if clipped else "")
+    )
 
 
 def _datum_text(datum: dict[str, Any]) -> list[str]:
