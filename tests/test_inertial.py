@@ -30,6 +30,14 @@ def test_the_vibration_record_counts_time_over_the_bounds_and_only_the_clip_coun
     assert record["clipped_at_s"] == [0.5, 0.9, 1.5]
 
 
+def test_a_pause_of_the_log_after_a_loud_sample_is_no_time_above_the_bounds() -> None:
+    t = np.array([0.0, 0.1, 0.2, 60.2, 60.3])  # the log paused for a minute after 0.2 s
+    level = np.full((5, 3), 5.0)
+    level[2] = VIBE_PROBLEM_M_S2 + 1.0
+    record = vibration_record(Vibration("VIBE[0].Clip0", t, level, np.zeros(5)))
+    assert record["above_problem_s"] == pytest.approx(0.2)  # twice its 0.1 s interval at most
+
+
 def test_a_quiet_accelerometer_has_nothing_to_record_but_its_level() -> None:
     t = np.arange(5) * 0.1
     record = vibration_record(Vibration("VIBE[0].Clip", t, np.full((5, 3), 2.0), np.zeros(5)))

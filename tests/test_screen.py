@@ -15,7 +15,9 @@ from altfuse.align import align, tick_cap
 from altfuse.cli import cli
 from altfuse.errors import NoUsableSensorsError
 from altfuse.evaluation import evaluate
+from altfuse.inertial import vibration_record
 from altfuse.info import damage
+from altfuse.io import read_log
 from altfuse.model import FEW_IN_A_ROW, Attitude, FlightLog, Series
 from altfuse.pipeline import FuseOptions, fuse_log
 from altfuse.screen import (
@@ -348,6 +350,24 @@ def test_an_impossible_imu_or_attitude_sample_is_dropped_and_moves_nothing(
     assert f"{source} 1" in stderr
     assert len(stderr.strip().splitlines()) == 1
     assert meta["method"] == method
+
+
+@pytest.mark.parametrize("bad", [float("inf"), float("nan")])
+def test_an_impossible_vibration_sample_is_dropped_and_the_record_stays_json(bad: float) -> None:
+    """A damaged text log's VIBE once gave a level of inf, which the range [0, inf) let through:
+    its provenance record could not be written (exit 3)."""
+    flight = screen(read_log(shared_log("ardupilot/beastayyg_log_0036_mechanical_failure.bin")))
+    vibration = flight.vibration
+    assert vibration is not None
+    level = vibration.level.copy()
+    level[10, 2] = bad
+    damaged = replace(flight, vibration=replace(vibration, level=level), dropped_inputs={})
+    kept = screen(damaged).vibration
+    assert kept is not None
+    assert kept.t.size == vibration.t.size - 1
+    assert np.isfinite(kept.level).all()
+    assert screen(damaged).dropped_inputs == {vibration.source: 1}
+    json.dumps(vibration_record(kept), allow_nan=False)
 
 
 def test_an_accelerometer_saturated_everywhere_is_no_accelerometer(tmp_path: Path) -> None:

@@ -138,12 +138,13 @@ def on_clock(t: FloatArray, a: FloatArray, grid: FloatArray, rate_hz: float) -> 
 def vibration_record(vibration: Vibration) -> dict[str, Any]:
     """The accelerometer's health over the log for the provenance: its largest vibration level
     [m/s²] (of the three axes), how long [s] it stood above VIBE_ACCEPTABLE_M_S2 and above
-    VIBE_PROBLEM_M_S2 (each sample counting until the next; the last, the median interval),
+    VIBE_PROBLEM_M_S2 (each sample counting until the next, at most twice the median interval:
+    a pause of the log is no time above; the last, the median interval),
     how many of its samples clipped (the rise of the cumulative count, which a reboot resets:
     only the rises count) and when (the first CLIPPED_LISTED samples at which the count rose)."""
     t, level = vibration.t, np.max(vibration.level, axis=1)
     step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-    held = np.diff(t, append=t[-1] + step) if t.size else np.zeros(0)
+    held = np.minimum(np.diff(t, append=t[-1] + step), 2.0 * step) if t.size else np.zeros(0)
     rises = np.diff(vibration.clips, prepend=vibration.clips[:1]) if t.size else np.zeros(0)
     clipped = t[rises > 0]
     return {

@@ -397,8 +397,10 @@ def _keep_rows(
     [``low``, ``high``] in every column, in time order and inside ``span``; the count of
     the others."""
     values = values.reshape(t.size, -1) if t.size else np.zeros((0, 1))
-    keep = np.isfinite(t) & (t <= MAX_BOOT_S)  # a NaN value fails the range test below
-    keep &= ((values >= low) & (values <= high)).all(axis=1)
+    keep = np.isfinite(t) & (t <= MAX_BOOT_S)
+    # finite, whatever the range: an infinite vibration level passed an unbounded one, and its
+    # record in the provenance was no JSON (a damaged text log's VIBE)
+    keep &= (np.isfinite(values) & (values >= low) & (values <= high)).all(axis=1)
     if span is not None:
         keep &= (t >= span[0]) & (t <= span[1])
     kept = np.flatnonzero(keep)
