@@ -141,15 +141,16 @@ def vibration_record(vibration: Vibration) -> dict[str, Any]:
     VIBE_PROBLEM_M_S2 (each sample counting until the next, at most twice the median interval:
     a pause of the log is no time above; the last, the median interval),
     how many of its samples clipped (the rise of the cumulative count, which a reboot resets:
-    only the rises count) and when (the first CLIPPED_LISTED samples at which the count rose)."""
+    only the rises count) and when (the first CLIPPED_LISTED samples at which the count rose).
+    ``vibration`` as screened: one sample at least (:func:`altfuse.screen.screen`)."""
     t, level = vibration.t, np.max(vibration.level, axis=1)
     step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-    held = np.minimum(np.diff(t, append=t[-1] + step), 2.0 * step) if t.size else np.zeros(0)
-    rises = np.diff(vibration.clips, prepend=vibration.clips[:1]) if t.size else np.zeros(0)
+    held = np.minimum(np.diff(t, append=t[-1] + step), 2.0 * step)
+    rises = np.diff(vibration.clips, prepend=vibration.clips[0])
     clipped = t[rises > 0]
     return {
         "source": vibration.source,
-        "max_level_m_s2": float(level.max()) if t.size else None,
+        "max_level_m_s2": float(level.max()),
         "above_acceptable_s": float(held[level > VIBE_ACCEPTABLE_M_S2].sum()),
         "above_problem_s": float(held[level > VIBE_PROBLEM_M_S2].sum()),
         "clipped_samples": int(rises[rises > 0].sum()),
